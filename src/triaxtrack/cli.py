@@ -1,0 +1,113 @@
+"""Command line: ``triaxtrack kit | simulate | check-sim | score``."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from dataclasses import fields
+from pathlib import Path
+
+DEFAULT_DESIGN = Path(__file__).resolve().parents[2] / "config" / "kit.yaml"
+
+
+def _kit(args: argparse.Namespace) -> int:
+    from triaxtrack.kit import export_kit, load_design
+
+    export_kit(load_design(args.design), args.out)
+    print(f"kit written to {args.out}")
+    return 0
+
+
+def _simulate(args: argparse.Namespace) -> int:
+    from triaxtrack.kit import export_kit, load_design
+    from triaxtrack.simulate import SimulationConfig, simulate_test
+
+    opts = {f.name: getattr(args, f.name) for f in fields(SimulationConfig) if getattr(args, f.name, None) is not None}
+    cfg = SimulationConfig.from_dict(opts)
+    out = Path(args.out)
+    kit_dir = out / "kit"
+    t0 = time.perf_counter()
+    export_kit(load_design(args.design), kit_dir)
+    simulate_test(cfg, kit_dir, out, args.name or out.name, args.chunk_size)
+    dt = time.perf_counter() - t0
+    print(f"simulated {cfg.cameras} cameras x {cfg.frames} frames ({cfg.width}x{cfg.height}) in {dt:.1f} s "
+          f"({dt / (cfg.cameras * cfg.frames):.3f} s per camera-frame) -> {out}")  # fmt: skip
+    return 0
+
+
+def _check_sim(args: argparse.Namespace) -> int:
+    from triaxtrack.simulate import check_simulation
+
+    rep = check_simulation(args.test_dir, args.json)
+    for key in ("air_dots", "membrane_dots"):
+        s = rep[key]
+        print(f"{key:<14} n={s['n']:<6} median {s['median_px']:.4f} px  p95 {s['p95_px']:.4f} px  "
+              f"bias ({s['bias_u_px']:+.4f}, {s['bias_v_px']:+.4f}) px")  # fmt: skip
+    print("ok" if rep["ok"] else "NOT OK")
+    return 0 if rep["ok"] else 1
+
+
+def _score(args: argparse.Namespace) -> int:
+    import yaml
+
+    from triaxtrack.score import ScoreTolerances, format_table, score
+
+    tol = ScoreTolerances()
+    if args.config:
+        tol = ScoreTolerances.from_dict(yaml.safe_load(Path(args.config).read_text()).get("score"))
+    try:
+        df = score(args.results_dir, args.truth_dir, tol)
+    except ValueError as err:
+        print(f"triaxtrack score: {err}", file=sys.stderr)
+        return 2
+    print(format_table(df))
+    if args.json:
+        Path(args.json).write_text(json.dumps(df.to_dict(orient="records"), indent=2, default=float))
+    return 0 if df.passed.all() else 1
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="triaxtrack", description=__doc__)
+    sub = p.add_subparsers(dest="command", required=True)
+
+    k = sub.add_parser("kit", help="export the target kit (kit.json, targets.csv, textures, sheets, board)")
+    k.add_argument("out")
+    k.add_argument("--design", default=str(DEFAULT_DESIGN), help="kit design YAML (default: config/kit.yaml)")
+    k.set_defaults(func=_kit)
+
+    s = sub.add_parser("simulate", help="simulate a triaxial test into a test folder")
+    s.add_argument("out")
+    s.add_argument("--design", default=str(DEFAULT_DESIGN))
+    s.add_argument("--name", default=None, help="test name (default: the folder name)")
+    s.add_argument("--chunk-size", type=int, default=50)
+    from triaxtrack.simulate import SimulationConfig
+
+    for f in fields(SimulationConfig):
+        typ = {"int": int, "float": float, "str": str}[f.type if isinstance(f.type, str) else f.type.__name__]
+        s.add_argument(f"--{f.name.replace('_', '-')}", dest=f.name, type=typ, default=None,
+                       help=f"default {f.default}")  # fmt: skip
+    s.set_defaults(func=_simulate)
+
+    c = sub.add_parser("check-sim", help="measure a simulated test's rendered dots against its truth")
+    c.add_argument("test_dir")
+    c.add_argument("--json", default=None)
+    c.set_defaults(func=_check_sim)
+
+    sc = sub.add_parser("score", help="compare a results folder with a truth folder")
+    sc.add_argument("results_dir")
+    sc.add_argument("truth_dir")
+    sc.add_argument("--config", default=None, help="config YAML with a `score` section of tolerances")
+    sc.add_argument("--json", default=None)
+    sc.set_defaults(func=_score)
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    return args.func(args)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,110 @@
+"""Score a results folder against a synthetic test's truth.
+
+``score(results_dir, truth_dir, tolerances)`` compares whatever results exist (cameras now;
+points, IDs and volume as the later stages land) with ``truth/`` and returns a tidy table with
+one row per metric and item: ``metric``, ``item`` (a camera name or 'all'), ``value``,
+``tolerance`` (NaN when only reported), ``unit``, ``passed``.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, fields
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from triaxtrack.optics import Camera
+
+
+@dataclass(frozen=True)
+class ScoreTolerances:
+    """Pass limits (config ``score``); issue 3-5 metrics are added here as they land."""
+
+    focal_rel: float = 0.002
+    principal_point_px: float = 1.0
+    camera_center_mm: float = 0.5
+    camera_rotation_deg: float = 0.05
+
+    @staticmethod
+    def from_dict(d: dict | None) -> ScoreTolerances:
+        d = dict(d or {})
+        known = {f.name for f in fields(ScoreTolerances)}
+        return ScoreTolerances(**{k: float(v) for k, v in d.items() if k in known})
+
+
+def load_cameras(path: str | Path) -> dict[str, Camera]:
+    """Cameras of a ``cameras.json`` (ValueError naming the file when unreadable)."""
+    path = Path(path)
+    try:
+        cams = json.loads(path.read_text())["cameras"]
+        return {k: Camera.from_json(k, v) for k, v in cams.items()}
+    except (OSError, KeyError, TypeError, ValueError) as err:
+        raise ValueError(f"{path}: not a cameras.json: {err}") from err
+
+
+def rotation_angle_deg(Ra: np.ndarray, Rb: np.ndarray) -> float:
+    """Angle of the rotation between two rotation matrices, degrees."""
+    c = (np.trace(Ra.T @ Rb) - 1) / 2
+    return float(np.degrees(np.arccos(np.clip(c, -1.0, 1.0))))
+
+
+def score_cameras(result: dict[str, Camera], truth: dict[str, Camera], tol: ScoreTolerances) -> pd.DataFrame:
+    """Per-camera intrinsic and pose errors of estimated cameras against the true ones."""
+    rows = []
+    for name, cam in sorted(result.items()):
+        if name not in truth:
+            rows.append(dict(metric="camera_unknown", item=name, value=np.nan, tolerance=np.nan, unit="", passed=False))
+            continue
+        tr = truth[name]
+        f_err = max(abs(cam.K[0, 0] / tr.K[0, 0] - 1), abs(cam.K[1, 1] / tr.K[1, 1] - 1))
+        pp = float(np.hypot(cam.K[0, 2] - tr.K[0, 2], cam.K[1, 2] - tr.K[1, 2]))
+        rows.append(dict(metric="focal_rel_error", item=name, value=f_err, tolerance=tol.focal_rel, unit=""))
+        rows.append(dict(metric="principal_point_error", item=name, value=pp, tolerance=tol.principal_point_px, unit="px"))
+        has_pose = not (np.allclose(cam.R, np.eye(3)) and np.allclose(cam.t, 0))
+        if has_pose:
+            dc = float(np.linalg.norm(cam.center - tr.center))
+            rows.append(dict(metric="camera_center_error", item=name, value=dc, tolerance=tol.camera_center_mm, unit="mm"))
+            rows.append(dict(metric="camera_rotation_error", item=name, value=rotation_angle_deg(cam.R, tr.R),
+                             tolerance=tol.camera_rotation_deg, unit="deg"))  # fmt: skip
+    for name in sorted(set(truth) - set(result)):
+        rows.append(dict(metric="camera_missing", item=name, value=np.nan, tolerance=np.nan, unit="", passed=False))
+    for r in rows:
+        if "passed" not in r:
+            r["passed"] = bool(np.isnan(r["tolerance"]) or r["value"] <= r["tolerance"])
+    return pd.DataFrame(rows, columns=["metric", "item", "value", "tolerance", "unit", "passed"])
+
+
+def score(results_dir: str | Path, truth_dir: str | Path, tol: ScoreTolerances | None = None) -> pd.DataFrame:
+    """Every metric that the results present in ``results_dir`` allow, against ``truth_dir``.
+
+    ``truth_dir`` may be a test folder (its ``truth/`` is used) or the truth folder itself.
+    """
+    tol = tol or ScoreTolerances()
+    results_dir, truth_dir = Path(results_dir), Path(truth_dir)
+    if (truth_dir / "truth").is_dir():
+        truth_dir = truth_dir / "truth"
+    if not (truth_dir / "cameras.json").exists():
+        raise ValueError(f"{truth_dir}: no truth here (cameras.json missing)")
+    if not results_dir.is_dir():
+        raise ValueError(f"{results_dir}: no such results folder")
+    parts = []
+    if (results_dir / "cameras.json").exists():
+        parts.append(score_cameras(load_cameras(results_dir / "cameras.json"), load_cameras(truth_dir / "cameras.json"), tol))
+    if not parts:
+        return pd.DataFrame(columns=["metric", "item", "value", "tolerance", "unit", "passed"])
+    return pd.concat(parts, ignore_index=True)
+
+
+def format_table(df: pd.DataFrame) -> str:
+    """Human-readable score table."""
+    if df.empty:
+        return "nothing to score: the results folder holds none of cameras.json, points, volume"
+    lines = [f"{'metric':<26} {'item':<8} {'value':>12} {'tolerance':>10} {'unit':<4} result"]
+    for r in df.itertuples(index=False):
+        tol = "" if pd.isna(r.tolerance) else f"{r.tolerance:.4g}"
+        val = "missing" if pd.isna(r.value) else f"{r.value:.5g}"
+        lines.append(f"{r.metric:<26} {r.item:<8} {val:>12} {tol:>10} {r.unit:<4} {'ok' if r.passed else 'FAIL'}")
+    lines.append(f"{int(df.passed.sum())} of {len(df)} within tolerance")
+    return "\n".join(lines)

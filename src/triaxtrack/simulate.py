@@ -1,0 +1,754 @@
+"""A physically exact simulated triaxial test, written as a test folder (``test-folder.md``).
+
+The scene: the kit's printed shapes on four cylinders (cell wall in air; pedestals and membrane
+in water behind the acrylic wall), a ring of wide-angle cameras (OpenCV pinhole +
+Brown-Conrady distortion), and a specimen that deforms as :class:`Deformation` says.
+
+Rendering is forward and exact at every polygon vertex: a vertex in air is projected with
+``cv2.projectPoints``; a vertex in water with :func:`project_water` (Snell's law at both walls,
+solved to 1e-10 mm). Polygons are filled with exact area coverage (:mod:`triaxtrack.raster`),
+so a dot's rendered centroid differs from the exact image of its centre only by the physical
+bias of perspective and refraction across the dot (measured by the tests). What is drawn,
+back to front: background, pedestals (sides and the visible end faces), their white labels and
+black ink, the membrane, its dots, then the white bands and black ink on the cell's outer wall.
+Faces turned away from the camera are culled (the specimen and pedestals are convex). Not
+drawn: the backs of the cell's far-side labels (seen through the water they are hidden
+behind the specimen for the default ring; document any set-up where they matter), shadows and
+reflections. Cameras must sit between the pedestal faces (``0 < camera_height_mm < height``),
+so the pedestals never hide the membrane.
+
+Frame ``k`` has time ``k / fps`` s and loading progress ``p = k / (frames - 1)``.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+import zlib
+from dataclasses import asdict, dataclass, fields
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pandas as pd
+import yaml
+
+from triaxtrack.centroid import local_centroid
+from triaxtrack.deformation import Deformation
+from triaxtrack.kit import (
+    ShapeSet,
+    board_corners_mm,
+    board_polygons_mm,
+    load_design,
+    printed_shapes,
+    surface_by_name,
+    target_table,
+)
+from triaxtrack.optics import Camera, CellOptics, project_air, project_water
+from triaxtrack.raster import composite, packed_polygon_coverage, paint
+from triaxtrack.tables import OBSERVATIONS, POINTS, VOLUME, read_table, write_table
+from triaxtrack.video import VideoWriter
+
+# grey levels of the materials (8-bit, before lighting and noise)
+GREY_BACKGROUND = 40.0
+GREY_PEDESTAL_SIDE = 115.0
+GREY_PEDESTAL_FACE = 95.0
+GREY_MEMBRANE = 195.0
+GREY_LABEL = 230.0
+GREY_INK = 22.0
+VIGNETTING = 0.22  # relative fall-off of light at the image corners
+# tessellation of the untextured surfaces (their outlines only; dots are drawn exactly)
+MEMBRANE_QUADS = (96, 48)  # (theta, Z)
+PEDESTAL_QUADS = 72
+# placement jitter of the simulated cameras (uniform +- these)
+JITTER_ANGLE_DEG = 1.5
+JITTER_POSITION_MM = 3.0
+JITTER_ROTATION_DEG = 0.7
+JITTER_FOCAL_REL = 0.01
+JITTER_PRINCIPAL_REL = 0.005
+JITTER_K1, JITTER_K2, JITTER_P = 0.02, 0.01, 3e-4
+EDGE_MARGIN_PX = 2.0  # a target is "seen" only if its whole image is this far inside the frame
+OCCLUSION_TOL = 0.01  # coverage by a cell band above which a target behind it is hidden
+SUBROWS_INK = 16  # y sampling of printed ink: keeps rendered centroids exact to < 0.005 px
+SUBROWS_PLAIN = 4  # y sampling of outlines and white labels (no measurement relies on them)
+
+
+@dataclass(frozen=True)
+class SimulationConfig:
+    """What to simulate. Lengths mm, times s, angles as named; see config/README.md."""
+
+    cameras: int = 13
+    frames: int = 100
+    width: int = 1280
+    height: int = 720
+    fps: float = 15.0
+    seed: int = 1
+    codec: str = "h264"
+    crf: int = 14
+    axial_strain: float = 0.05
+    bulge_mm: float = 2.0
+    shear_mm: float = 0.0
+    camera_radius_mm: float = 340.0
+    camera_height_mm: float = 72.0
+    focal_factor: float = 0.62  # focal length / image width (about 93 degrees across)
+    k1: float = -0.3
+    k2: float = 0.08
+    noise_sigma: float = 1.5
+    blur_sigma_px: float = 0.0
+    calibration_images: int = 15
+    min_view_cos: float = 0.3
+
+    @staticmethod
+    def from_dict(d: dict) -> SimulationConfig:
+        known = {f.name for f in fields(SimulationConfig)}
+        unknown = set(d) - known
+        if unknown:
+            raise ValueError(f"unknown simulation settings: {sorted(unknown)}; known: {sorted(known)}")
+        cfg = SimulationConfig(**d)
+        if cfg.codec not in ("h264", "h265"):
+            raise ValueError(f"codec must be h264 or h265, not {cfg.codec!r}")
+        if cfg.frames < 2 or cfg.cameras < 1:
+            raise ValueError("a simulated test needs at least 2 frames and 1 camera")
+        return cfg
+
+
+def camera_names(n: int) -> list[str]:
+    return [f"cam{i + 1:02d}" for i in range(n)]
+
+
+def look_at(center: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """Rotation cell -> camera for a camera at ``center`` looking at ``target``, +z up in image."""
+    fwd = target - center
+    fwd /= np.linalg.norm(fwd)
+    right = np.cross(fwd, [0.0, 0.0, 1.0])
+    right /= np.linalg.norm(right)
+    down = np.cross(fwd, right)
+    return np.vstack([right, down, fwd])
+
+
+def make_cameras(cfg: SimulationConfig) -> list[Camera]:
+    """A seeded ring of cameras around the cell, all looking at the axis."""
+    rng = np.random.default_rng(cfg.seed)
+    cams = []
+    w, h = cfg.width, cfg.height
+    for i, name in enumerate(camera_names(cfg.cameras)):
+        phi = 2 * np.pi * i / cfg.cameras + np.deg2rad(rng.uniform(-1, 1) * JITTER_ANGLE_DEG)
+        rad = cfg.camera_radius_mm + rng.uniform(-1, 1) * JITTER_POSITION_MM
+        c = np.array([rad * np.cos(phi), rad * np.sin(phi), cfg.camera_height_mm])
+        c[2] += rng.uniform(-1, 1) * JITTER_POSITION_MM
+        R0 = look_at(c, np.array([0.0, 0.0, cfg.camera_height_mm]))
+        jitter = np.deg2rad(rng.uniform(-1, 1, 3) * JITTER_ROTATION_DEG)
+        R = cv2.Rodrigues(jitter)[0] @ R0
+        f = cfg.focal_factor * w * (1 + rng.uniform(-1, 1) * JITTER_FOCAL_REL)
+        cx = (w - 1) / 2 + rng.uniform(-1, 1) * JITTER_PRINCIPAL_REL * w
+        cy = (h - 1) / 2 + rng.uniform(-1, 1) * JITTER_PRINCIPAL_REL * h
+        K = np.array([[f, 0, cx], [0, f, cy], [0, 0, 1.0]])
+        dist = np.array([
+            cfg.k1 + rng.uniform(-1, 1) * JITTER_K1,
+            cfg.k2 + rng.uniform(-1, 1) * JITTER_K2,
+            rng.uniform(-1, 1) * JITTER_P,
+            rng.uniform(-1, 1) * JITTER_P,
+            0.0,
+        ])  # fmt: skip
+        cams.append(Camera(name, w, h, K, dist, R, -R @ c))
+    return cams
+
+
+def deformation_for(cfg: SimulationConfig, design: dict) -> Deformation:
+    s = design["specimen"]
+    return Deformation(
+        radius=s["diameter"] / 2,
+        height=s["height"],
+        membrane_thickness=s["membrane_thickness"],
+        axial_strain=cfg.axial_strain,
+        bulge_mm=cfg.bulge_mm,
+        shear_mm=cfg.shear_mm,
+    )
+
+
+def progress(frame: int, frames: int) -> float:
+    """Loading progress of a frame: 0 at the first, 1 at the last (constant strain rate)."""
+    return frame / (frames - 1)
+
+
+def cell_optics(design: dict) -> CellOptics:
+    c = design["cell"]
+    return CellOptics(
+        outer_radius=c["outer_radius"],
+        inner_radius=c["inner_radius"],
+        n_acrylic=c["refractive_index"],
+        n_water=design["water"]["refractive_index"],
+        z_min=c["z_min"],
+        z_max=c["z_max"],
+    )
+
+
+def load_kit_design(kit_dir: str | Path) -> dict:
+    """The design mapping back from a kit export (``kit.json`` + ``board.json``)."""
+    kit_dir = Path(kit_dir)
+    try:
+        kit = json.loads((kit_dir / "kit.json").read_text())
+        board = json.loads((kit_dir / "board.json").read_text())
+    except (OSError, json.JSONDecodeError) as err:
+        raise ValueError(f"{kit_dir}: not a readable kit export: {err}") from err
+    design = {k: v for k, v in kit.items() if k not in ("surfaces", "n_targets", "units")}
+    design["coded_target"] = {k: v for k, v in kit["coded_target"].items() if k not in ("codes", "code_notes")}
+    design["board"] = {k: v for k, v in board.items() if k not in ("inner_corners", "units")}
+    return design
+
+
+# ---------------------------------------------------------------- the scene
+@dataclass
+class Scene:
+    """Everything needed to render any frame of a simulated test."""
+
+    name: str
+    cfg: SimulationConfig
+    design: dict
+    table: pd.DataFrame
+    shapes: list[ShapeSet]
+    cameras: dict[str, Camera]
+    deformation: Deformation
+    cell: CellOptics
+
+
+def load_scene(test_dir: str | Path) -> Scene:
+    test_dir = Path(test_dir)
+    scene = json.loads((test_dir / "truth" / "scene.json").read_text())
+    cfg = SimulationConfig.from_dict(scene["simulation"])
+    design = load_kit_design(test_dir / "kit")
+    table = target_table(design)
+    cams = json.loads((test_dir / "truth" / "cameras.json").read_text())["cameras"]
+    return Scene(
+        name=scene["name"],
+        cfg=cfg,
+        design=design,
+        table=table,
+        shapes=printed_shapes(design, table),
+        cameras={k: Camera.from_json(k, v) for k, v in cams.items()},
+        deformation=Deformation(**scene["deformation"]),
+        cell=cell_optics(design),
+    )
+
+
+def make_scene(cfg: SimulationConfig, kit_dir: str | Path, test_dir: str | Path, name: str) -> None:
+    """Write the static part of a simulated test folder.
+
+    ``test.yaml``, ``kit/`` (a copy of the kit export), ``truth/scene.json`` (how to rebuild
+    the scene), ``truth/cameras.json`` and ``truth/volume.parquet``. Videos, calibration
+    images and the per-target truth are written by :func:`render_chunk`,
+    :func:`render_calibration` and :func:`finish_truth`.
+    """
+    test_dir = Path(test_dir)
+    (test_dir / "truth").mkdir(parents=True, exist_ok=True)
+    if Path(kit_dir).resolve() != (test_dir / "kit").resolve():
+        shutil.copytree(kit_dir, test_dir / "kit", dirs_exist_ok=True)
+    design = load_kit_design(test_dir / "kit")
+    deformation = deformation_for(cfg, design)
+    cams = make_cameras(cfg)
+    if not 0 < cfg.camera_height_mm < design["specimen"]["height"]:
+        raise ValueError("camera_height_mm must lie between the pedestal faces")
+    (test_dir / "test.yaml").write_text(yaml.safe_dump({
+        "name": name,
+        "fps": float(cfg.fps),
+        "frames": int(cfg.frames),
+        "cameras": [c.name for c in cams],
+        "kit": "kit",
+        "simulated": True,
+    }, sort_keys=False))  # fmt: skip
+    (test_dir / "truth" / "scene.json").write_text(json.dumps({
+        "name": name,
+        "simulation": asdict(cfg),
+        "deformation": asdict(deformation),
+        "notes": "axial_strain = (H0 - H) / H0 and volumetric_strain = (V0 - V) / V0, "
+                 "compression positive; volume = soil inside the membrane's inner surface, "
+                 "between the pedestal faces",
+    }, indent=2))  # fmt: skip
+    (test_dir / "truth" / "cameras.json").write_text(
+        json.dumps({"cameras": {c.name: c.to_json() for c in cams}}, indent=2)
+    )
+    write_table(truth_volume(cfg, deformation), test_dir / "truth" / "volume.parquet", VOLUME)
+
+
+def truth_volume(cfg: SimulationConfig, deformation: Deformation) -> pd.DataFrame:
+    """Exact soil volume and strains at every frame."""
+    frames = np.arange(cfg.frames)
+    v0 = deformation.soil_volume(0.0)
+    vol = np.array([deformation.soil_volume(progress(k, cfg.frames)) for k in frames])
+    h = np.array([deformation.current_height(progress(k, cfg.frames)) for k in frames])
+    return pd.DataFrame({
+        "frame": frames.astype(np.int64),
+        "time_s": frames / cfg.fps,
+        "volume_mm3": vol,
+        "axial_strain": (deformation.height - h) / deformation.height,
+        "volumetric_strain": (v0 - vol) / v0,
+    })  # fmt: skip
+
+
+def target_positions(scene: Scene, frame: int) -> pd.DataFrame:
+    """Cell-frame centre (x, y, z) of every target at a frame (membrane: printed surface)."""
+    p = progress(frame, scene.cfg.frames)
+    t = scene.table
+    xyz = np.zeros((len(t), 3))
+    for surface, sel in t.groupby("surface").groups.items():
+        xyz[t.index.get_indexer(sel)] = _surface_points(
+            scene, surface, t.loc[sel, ["theta_rad", "z_mm"]].to_numpy(), p
+        )[0]
+    return pd.DataFrame({"id": t["id"].to_numpy(), "x_mm": xyz[:, 0], "y_mm": xyz[:, 1], "z_mm": xyz[:, 2]})
+
+
+def _surface_points(scene: Scene, surface: str, theta_z: np.ndarray, p: float):
+    """3-D points and outward normals of (theta, z) surface coordinates at progress p."""
+    th, z = theta_z[:, 0], theta_z[:, 1]
+    if surface == "membrane":
+        return scene.deformation.outer_surface(th, z, p)
+    rad = surface_by_name(scene.design)[surface]["radius"]
+    pts = np.c_[rad * np.cos(th), rad * np.sin(th), z]
+    nrm = np.c_[np.cos(th), np.sin(th), np.zeros_like(th)]
+    if surface == "pedestal_top":
+        pts = pts + scene.deformation.top_displacement(p)
+    return pts, nrm
+
+
+# ---------------------------------------------------------------- rendering
+def _strip_polygons(a: np.ndarray, b: np.ndarray, front: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Outline polygons of the runs of front-facing quads in a closed strip.
+
+    ``a`` and ``b`` are the (n + 1, 2) image points of the strip's two edges (the last equal to
+    the first), ``front`` the (n,) facing of quad k between points k and k + 1. Each cyclic run
+    of facing quads becomes one polygon; quads with non-finite corners end a run.
+    """
+    n = len(front)
+    ok = front & np.isfinite(a[:-1]).all(1) & np.isfinite(a[1:]).all(1) & np.isfinite(b[:-1]).all(1) & np.isfinite(b[1:]).all(1)
+    if not ok.any():
+        return np.zeros((0, 2)), np.zeros(0, np.int64)
+    if ok.all():
+        runs = [(0, n)]
+    else:
+        first_off = int(np.argmin(ok))
+        order = [(first_off + k) % n for k in range(n)]
+        runs, start = [], None
+        for j, k in enumerate(order):
+            if ok[k] and start is None:
+                start = j
+            if not ok[k] and start is not None:
+                runs.append((order[start], j - start))
+                start = None
+        if start is not None:
+            runs.append((order[start], n - start))
+    verts, counts = [], []
+    for k0, length in runs:
+        idx = (k0 + np.arange(length + 1)) % n
+        verts.append(np.vstack([a[idx], b[idx[::-1]]]))
+        counts.append(2 * (length + 1))
+    return np.vstack(verts), np.array(counts, np.int64)
+
+
+class CameraRenderer:
+    """Renders the frames of one camera in order, keeping last frame's ray solutions."""
+
+    def __init__(self, scene: Scene, camera: str):
+        self.scene = scene
+        self.cam = scene.cameras[camera]
+        self._xy: dict[str, np.ndarray] = {}
+        self._xy_prev: dict[str, np.ndarray] = {}
+        h, w = self.cam.height, self.cam.width
+        yy, xx = np.mgrid[0:h, 0:w]
+        r2 = ((xx - self.cam.K[0, 2]) ** 2 + (yy - self.cam.K[1, 2]) ** 2) / ((w / 2) ** 2 + (h / 2) ** 2)
+        self._light = 1 - VIGNETTING * r2
+        s = scene.deformation
+        nt, nz = MEMBRANE_QUADS
+        th, zz = np.meshgrid(2 * np.pi * np.arange(nt + 1) / nt, np.linspace(0, s.height, nz + 1))
+        self._mgrid = np.c_[th.ravel(), zz.ravel()]
+        self._mgrid_shape = (nz + 1, nt + 1)
+
+    # -- projection with warm starts
+    def _project(self, key: str, pts: np.ndarray, in_water: bool, sel: np.ndarray | None = None):
+        """Pixels (N, 2) and water ray directions (N, 3) of points; ``sel`` picks which to solve."""
+        n = len(pts)
+        uv = np.full((n, 2), np.nan)
+        d2 = np.full((n, 3), np.nan)
+        sel = np.arange(n) if sel is None else np.flatnonzero(sel)
+        if not in_water:
+            uv[sel] = project_air(self.cam, pts[sel])
+            return uv, d2
+        cache = self._xy.get(key)
+        if cache is None or len(cache) != n:
+            cache = np.full((n, 2), np.nan)
+        prev = self._xy_prev.get(key)
+        xy0 = cache[sel]
+        if prev is not None and len(prev) == n:  # frames are rendered in order: extrapolate
+            lin = 2 * cache[sel] - prev[sel]
+            xy0 = np.where(np.isfinite(lin), lin, xy0)
+        uv[sel], d2[sel], xy = project_water(self.cam, pts[sel], self.scene.cell, xy0)
+        self._xy_prev[key] = cache
+        cache = cache.copy()
+        cache[sel] = xy
+        self._xy[key] = cache
+        return uv, d2
+
+    def _facing(self, pts, nrm, d2, in_water):
+        """Cosine between the outward normal and the direction back towards the camera."""
+        if in_water:
+            return -np.einsum("ij,ij->i", nrm, d2)
+        v = self.cam.center - pts
+        return np.einsum("ij,ij->i", nrm, v) / np.linalg.norm(v, axis=1)
+
+    def _shape_layer(self, shapes: ShapeSet, p: float):
+        """Projected polygons of a shape set, culled; plus the per-polygon centre data."""
+        sc = self.scene
+        in_water = surface_by_name(sc.design)[shapes.surface]["medium_outside"] == "water"
+        cpts, cnrm = _surface_points(sc, shapes.surface, shapes.center, p)
+        cuv, cd2 = self._project(f"{shapes.surface}/{shapes.layer}/c", cpts, in_water)
+        cos = self._facing(cpts, cnrm, cd2, in_water)
+        keep = cos > 0
+        vsel = np.repeat(keep, shapes.counts)
+        vpts, _ = _surface_points(sc, shapes.surface, shapes.theta_z, p)
+        vuv, _ = self._project(f"{shapes.surface}/{shapes.layer}/v", vpts, in_water, vsel)
+        return vuv[vsel], shapes.counts[keep], keep, cuv, cos
+
+    def _base_layers(self, p: float) -> list[tuple[np.ndarray, np.ndarray, float]]:
+        """Untextured surfaces as strips of front-facing quads: pedestal sides and visible end
+        faces, then the membrane (their outlines only; the printed shapes are drawn exactly)."""
+        sc = self.scene
+        out = []
+        ped = sc.design["pedestal"]
+        h0 = sc.design["specimen"]["height"]
+        n = PEDESTAL_QUADS
+        t = 2 * np.pi * np.arange(n + 1) / n
+        r_m = sc.deformation.radius + sc.deformation.membrane_thickness
+        for name, z0, z1, face_z, face_sign in (
+            ("pedestal_bottom", -ped["height"], 0.0, 0.0, 1.0),
+            ("pedestal_top", h0, h0 + ped["height"], h0, -1.0),
+        ):
+            shift = sc.deformation.top_displacement(p) if name == "pedestal_top" else np.zeros(3)
+            rad = ped["radius"]
+
+            def ring(r, z, shift=shift):
+                return np.c_[r * np.cos(t), r * np.sin(t), np.full_like(t, z)] + shift
+
+            side_n = np.c_[np.cos(t), np.sin(t), 0 * t]
+            face_n = np.c_[0 * t, 0 * t, face_sign + 0 * t]
+            for (ra, za), (rb, zb), nrm, grey, kind in (
+                ((rad, z0), (rad, z1), side_n, GREY_PEDESTAL_SIDE, "side"),
+                ((r_m, face_z), (rad, face_z), face_n, GREY_PEDESTAL_FACE, "face"),
+            ):
+                pts = np.vstack([ring(ra, za), ring(rb, zb)])
+                uv, d2 = self._project(f"{name}/{kind}", pts, True)
+                cos = -((nrm[:n] + nrm[1:]) * (d2[:n] + d2[1 : n + 1])).sum(axis=1)
+                verts, counts = _strip_polygons(uv[: n + 1], uv[n + 1 :], cos > 0)
+                out.append((verts, counts, grey))
+        # membrane: one strip per row of quads
+        pts, nrm = sc.deformation.outer_surface(self._mgrid[:, 0], self._mgrid[:, 1], p)
+        c = self.cam.center
+        rough = np.einsum("ij,ij->i", nrm, c - pts) > -0.5 * np.linalg.norm(c - pts, axis=1)
+        uv, d2 = self._project("membrane/grid", pts, True, rough)
+        nz, nt = self._mgrid_shape
+        uv = uv.reshape(nz, nt, 2)
+        cos = (-np.einsum("ij,ij->i", nrm, d2)).reshape(nz, nt)
+        qcos = cos[:-1, :-1] + cos[:-1, 1:] + cos[1:, 1:] + cos[1:, :-1]
+        vs, cs = [], []
+        for i in range(nz - 1):
+            v, cnt = _strip_polygons(uv[i], uv[i + 1], qcos[i] > 0)
+            vs.append(v)
+            cs.append(cnt)
+        out.append((np.vstack(vs), np.concatenate(cs), GREY_MEMBRANE))
+        return out
+
+    def render(self, frame: int) -> tuple[np.ndarray, pd.DataFrame]:
+        """The camera's uint8 grey image at ``frame`` and the exact observations it holds."""
+        sc, cam = self.scene, self.cam
+        p = progress(frame, sc.cfg.frames)
+        h, w = cam.height, cam.width
+        img = np.full((h, w), GREY_BACKGROUND)
+        layers = self._base_layers(p)
+        for verts, counts, grey in layers[:4]:  # pedestals
+            img, _ = paint(img, verts, counts, grey, SUBROWS_PLAIN)
+        obs = []
+        band_cov = None
+        order = [s for s in sc.shapes if s.surface.startswith("pedestal")]
+        order += [None]  # the membrane outline goes here
+        order += [s for s in sc.shapes if s.surface == "membrane"]
+        order += [s for s in sc.shapes if s.surface == "cell_outer"]
+        pending = []
+        for shapes in order:
+            if shapes is None:
+                verts, counts, grey = layers[4]
+                img, _ = paint(img, verts, counts, grey, SUBROWS_PLAIN)
+                continue
+            vuv, counts, keep, cuv, cos = self._shape_layer(shapes, p)
+            ink = shapes.layer == "ink"
+            grey = GREY_INK if ink else GREY_LABEL
+            img, cov = paint(img, vuv, counts, grey, SUBROWS_INK if ink else SUBROWS_PLAIN)
+            if shapes.surface == "cell_outer" and shapes.layer == "label":
+                band_cov = cov if band_cov is None else np.maximum(band_cov, cov)
+            if shapes.layer == "ink":
+                pending.append((shapes, vuv, counts, keep, cuv, cos))
+        for shapes, vuv, counts, keep, cuv, cos in pending:
+            obs.append(self._observations(shapes, vuv, counts, keep, cuv, cos, band_cov, frame))
+        img = self._camera_effects(img, frame)
+        return img, pd.concat(obs, ignore_index=True)
+
+    def _observations(self, shapes, vuv, counts, keep, cuv, cos, band_cov, frame) -> pd.DataFrame:
+        """Targets whose whole image is in the frame, facing enough, and not behind a band."""
+        cam = self.cam
+        ids_kept = shapes.ids[keep]
+        starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
+        lo = np.minimum.reduceat(vuv, starts) if len(counts) else np.zeros((0, 2))
+        hi = np.maximum.reduceat(vuv, starts) if len(counts) else np.zeros((0, 2))
+        # a target may have several ink polygons (a CT): combine by ID
+        df = pd.DataFrame({"id": ids_kept, "u0": lo[:, 0], "v0": lo[:, 1], "u1": hi[:, 0], "v1": hi[:, 1]})
+        box = df.groupby("id").agg(u0=("u0", "min"), v0=("v0", "min"), u1=("u1", "max"), v1=("v1", "max"))
+        m = EDGE_MARGIN_PX
+        inside = (box.u0 >= m) & (box.v0 >= m) & (box.u1 <= cam.width - 1 - m) & (box.v1 <= cam.height - 1 - m)
+        box = box[inside & np.isfinite(box).all(axis=1)]
+        centre = pd.DataFrame({"id": shapes.ids, "u_px": cuv[:, 0], "v_px": cuv[:, 1], "cos": cos})
+        centre = centre.drop_duplicates("id").set_index("id").loc[box.index]
+        centre = centre[centre.cos >= self.scene.cfg.min_view_cos]
+        if shapes.surface != "cell_outer" and band_cov is not None and len(centre):
+            b = box.loc[centre.index]
+            hidden = [
+                band_cov[int(np.floor(r.v0)) : int(np.ceil(r.v1)) + 1, int(np.floor(r.u0)) : int(np.ceil(r.u1)) + 1].max()
+                > OCCLUSION_TOL
+                for r in b.itertuples()
+            ]
+            centre = centre[~np.array(hidden, bool)]
+        return pd.DataFrame({
+            "camera": cam.name,
+            "frame": np.int64(frame),
+            "id": centre.index.to_numpy(np.int64),
+            "u_px": centre.u_px.to_numpy(),
+            "v_px": centre.v_px.to_numpy(),
+        })  # fmt: skip
+
+    def _camera_effects(self, img: np.ndarray, frame: int) -> np.ndarray:
+        """Vignetting, optional blur, sensor noise (seeded per camera and frame), 8-bit."""
+        cfg, cam = self.scene.cfg, self.cam
+        img = img * self._light
+        if cfg.blur_sigma_px > 0:
+            img = cv2.GaussianBlur(img, (0, 0), cfg.blur_sigma_px)
+        rng = np.random.default_rng([cfg.seed, zlib.crc32(cam.name.encode()), frame])
+        noise = rng.standard_normal(img.shape, dtype=np.float32)
+        img = img + cfg.noise_sigma * noise * np.sqrt(np.maximum(img, 1) / 128)  # shot-noise-like
+        return np.clip(np.round(img), 0, 255).astype(np.uint8)
+
+
+def render_chunk(
+    test_dir: str | Path, camera: str, start: int, stop: int, video_out: str | Path, observations_out: str | Path
+) -> None:
+    """Render frames ``[start, stop)`` of one camera: an H.264/H.265 segment and its truth."""
+    scene = load_scene(test_dir)
+    rend = CameraRenderer(scene, camera)
+    cam = scene.cameras[camera]
+    obs = []
+    Path(video_out).parent.mkdir(parents=True, exist_ok=True)
+    with VideoWriter(video_out, cam.width, cam.height, scene.cfg.fps, codec=scene.cfg.codec, crf=scene.cfg.crf) as vw:
+        for k in range(start, stop):
+            img, o = rend.render(k)
+            vw.write(img)
+            obs.append(o)
+    write_table(pd.concat(obs, ignore_index=True), observations_out, OBSERVATIONS)
+
+
+# ---------------------------------------------------------------- calibration images
+def board_poses(cfg: SimulationConfig, camera: Camera, board: dict, n: int) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Seeded board poses (R, t board -> camera) filling the image at varied tilts and distances."""
+    rng = np.random.default_rng([cfg.seed, zlib.crc32(camera.name.encode()), 7])
+    sheet, _ = board_polygons_mm(board)
+    corners = np.c_[sheet, np.zeros(len(sheet))]
+    size = np.ptp(sheet, axis=0)
+    centre = np.r_[sheet.min(axis=0) + size / 2, 0]
+    poses = []
+    tries = 0
+    cell_w = 3 if n >= 9 else 2
+    while len(poses) < n and tries < 5000:
+        tries += 1
+        # spread the board centre over a grid of image regions, then random within
+        k = len(poses)
+        gx, gy = (k % cell_w + rng.uniform()) / cell_w, ((k // cell_w) % cell_w + rng.uniform()) / cell_w
+        dist = rng.uniform(230, 420)
+        rv = np.deg2rad(np.r_[rng.uniform(-35, 35), rng.uniform(-35, 35), rng.uniform(-20, 20)])
+        R = cv2.Rodrigues(rv)[0]
+        fx = camera.K[0, 0]
+        x = (gx - 0.5) * camera.width * 0.8 / fx * dist
+        y = (gy - 0.5) * camera.height * 0.8 / fx * dist
+        t = np.array([x, y, dist]) - R @ centre
+        uv = project_air(Camera("b", camera.width, camera.height, camera.K, camera.dist, R, t), corners)
+        pc = corners @ R.T + t
+        if (pc[:, 2] > 50).all() and (uv >= 10).all() and (uv[:, 0] <= camera.width - 11).all() and (
+            uv[:, 1] <= camera.height - 11
+        ).all():
+            poses.append((R, t))
+    if len(poses) < n:
+        raise RuntimeError(f"could not place {n} calibration boards for {camera.name}")
+    return poses
+
+
+def render_board_image(camera: Camera, board: dict, R: np.ndarray, t: np.ndarray, noise: float, rng) -> np.ndarray:
+    """uint8 image of the checkerboard at pose (R, t) seen by ``camera`` (exact, distorted)."""
+    bcam = Camera("b", camera.width, camera.height, camera.K, camera.dist, R, t)
+    sheet, squares = board_polygons_mm(board, subdivide=8)
+    h, w = camera.height, camera.width
+    img = np.full((h, w), GREY_BACKGROUND)
+
+    def project(poly):
+        return project_air(bcam, np.c_[poly, np.zeros(len(poly))])
+
+    img = composite(img, packed_polygon_coverage(project(sheet), [len(sheet)], h, w), GREY_LABEL)
+    sq = np.vstack(squares)
+    img = composite(img, packed_polygon_coverage(project(sq), [len(s) for s in squares], h, w), GREY_INK)
+    img = img + rng.normal(0, noise, img.shape)
+    return np.clip(np.round(img), 0, 255).astype(np.uint8)
+
+
+def render_calibration(test_dir: str | Path, camera: str, out_dir: str | Path) -> None:
+    """Calibration board images of one camera (PNG) and, in truth/, the board poses."""
+    test_dir, out_dir = Path(test_dir), Path(out_dir)
+    scene = load_scene(test_dir)
+    cam = scene.cameras[camera]
+    board = scene.design["board"]
+    out_dir.mkdir(parents=True, exist_ok=True)
+    rng = np.random.default_rng([scene.cfg.seed, zlib.crc32(camera.encode()), 11])
+    poses = board_poses(scene.cfg, cam, board, scene.cfg.calibration_images)
+    record = []
+    for i, (R, t) in enumerate(poses):
+        img = render_board_image(cam, board, R, t, scene.cfg.noise_sigma, rng)
+        cv2.imwrite(str(out_dir / f"{i + 1:02d}.png"), img)
+        uv = project_air(Camera("b", cam.width, cam.height, cam.K, cam.dist, R, t), board_corners_mm(board))
+        record.append({"image": f"{i + 1:02d}.png", "R": R.tolist(), "t": t.tolist(), "corners_px": uv.tolist()})
+    truth = test_dir / "truth" / "calibration"
+    truth.mkdir(parents=True, exist_ok=True)
+    (truth / f"{camera}.json").write_text(json.dumps({"board_poses": record}))
+
+
+# ---------------------------------------------------------------- truth tables
+def finish_truth(test_dir: str | Path, observation_parts: list[str | Path]) -> None:
+    """Gather the per-chunk observations into ``truth/observations.parquet`` and write
+    ``truth/points.parquet`` (every target at every frame, ``n_rays`` = cameras that see it)."""
+    test_dir = Path(test_dir)
+    scene = load_scene(test_dir)
+    obs = pd.concat([read_table(p, OBSERVATIONS) for p in observation_parts], ignore_index=True)
+    write_table(obs, test_dir / "truth" / "observations.parquet", OBSERVATIONS)
+    n_rays = obs.groupby(["frame", "id"]).size()
+    rows = []
+    for k in range(scene.cfg.frames):
+        pos = target_positions(scene, k)
+        pos.insert(0, "frame", np.int64(k))
+        pos.insert(1, "time_s", k / scene.cfg.fps)
+        rows.append(pos)
+    pts = pd.concat(rows, ignore_index=True)
+    key = pd.MultiIndex.from_arrays([pts.frame, pts.id])
+    pts["n_rays"] = n_rays.reindex(key).fillna(0).astype(np.int64).to_numpy()
+    pts["rms_px"] = 0.0
+    write_table(pts, test_dir / "truth" / "points.parquet", POINTS)
+
+
+def simulate_test(
+    cfg: SimulationConfig, kit_dir: str | Path, test_dir: str | Path, name: str, chunk_size: int = 50
+) -> None:
+    """The whole simulation in one process (what the workflow fans out per camera and chunk)."""
+    from triaxtrack.video import concat_videos
+
+    test_dir = Path(test_dir)
+    make_scene(cfg, kit_dir, test_dir, name)
+    work = test_dir / ".chunks"
+    parts = []
+    for cam in camera_names(cfg.cameras):
+        segs = []
+        for start in range(0, cfg.frames, chunk_size):
+            stop = min(start + chunk_size, cfg.frames)
+            seg = work / cam / f"{start:06d}.mp4"
+            obs = work / cam / f"{start:06d}.parquet"
+            render_chunk(test_dir, cam, start, stop, seg, obs)
+            segs.append(seg)
+            parts.append(obs)
+        (test_dir / "videos").mkdir(exist_ok=True)
+        concat_videos(segs, test_dir / "videos" / f"{cam}.mp4")
+        render_calibration(test_dir, cam, test_dir / "calibration" / cam)
+    finish_truth(test_dir, parts)
+    shutil.rmtree(work)
+
+
+def make_kit_for(design_path: str | Path, out_dir: str | Path) -> Path:
+    """Export the kit of a design file (convenience for the CLI)."""
+    from triaxtrack.kit import export_kit
+
+    export_kit(load_design(design_path), out_dir)
+    return Path(out_dir)
+
+
+# ---------------------------------------------------------------- self-check
+def centroid_errors(test_dir: str | Path, camera: str, frame: int, gray: np.ndarray) -> pd.DataFrame:
+    """Rendered centroid minus exact image of the centre, for every dot a camera sees.
+
+    Columns: ``id``, ``surface``, ``du_px``, ``dv_px``, ``err_px`` (NaN where the blob is not
+    isolated in its window).
+    """
+    test_dir = Path(test_dir)
+    obs = read_table(test_dir / "truth" / "observations.parquet", OBSERVATIONS)
+    obs = obs[(obs.camera == camera) & (obs.frame == frame)]
+    targets = pd.read_csv(test_dir / "kit" / "targets.csv").set_index("id")
+    obs = obs[targets.loc[obs.id, "kind"].to_numpy() == "dot"]
+    uv = obs[["u_px", "v_px"]].to_numpy()
+    c = local_centroid(gray, uv)
+    d = c - uv
+    return pd.DataFrame({
+        "id": obs.id.to_numpy(),
+        "surface": targets.loc[obs.id, "surface"].to_numpy(),
+        "du_px": d[:, 0],
+        "dv_px": d[:, 1],
+        "err_px": np.hypot(d[:, 0], d[:, 1]),
+    })  # fmt: skip
+
+
+def check_simulation(test_dir: str | Path, out_json: str | Path | None = None) -> dict:
+    """Measure a simulated test against its own truth; optionally write the figures as JSON.
+
+    For the first and last frame of every camera, decoded from the video: the contrast-weighted
+    centroid of every dot the truth says the camera sees, against the exact image of the dot's
+    centre. Cell-wall dots are seen in air; membrane dots through both walls and the water.
+    Also checks frame counts and calibration images. ``ok`` is true when every video has all
+    its frames and the median errors are within 0.10 px (air) and 0.15 px (water).
+    """
+    from triaxtrack.video import probe_video, read_frame
+
+    test_dir = Path(test_dir)
+    scene_cfg = SimulationConfig.from_dict(json.loads((test_dir / "truth" / "scene.json").read_text())["simulation"])
+    meta = yaml.safe_load((test_dir / "test.yaml").read_text())
+    rows, per_camera = [], {}
+    for cam in meta["cameras"]:
+        video = test_dir / "videos" / f"{cam}.mp4"
+        info = probe_video(video)
+        n_cal = len(list((test_dir / "calibration" / cam).glob("*.png")))
+        for frame in sorted({0, scene_cfg.frames - 1}):
+            e = centroid_errors(test_dir, cam, frame, read_frame(video, frame))
+            e["camera"], e["frame"] = cam, frame
+            rows.append(e)
+        per_camera[cam] = {"frames": info["frames"], "calibration_images": n_cal}
+    err = pd.concat(rows, ignore_index=True)
+
+    def stats(sel: pd.DataFrame) -> dict:
+        ok = sel.dropna()
+        return {
+            "n": int(len(ok)),
+            "measured_fraction": float(len(ok) / max(len(sel), 1)),
+            "median_px": float(ok.err_px.median()) if len(ok) else None,
+            "p95_px": float(ok.err_px.quantile(0.95)) if len(ok) else None,
+            "bias_u_px": float(ok.du_px.mean()) if len(ok) else None,
+            "bias_v_px": float(ok.dv_px.mean()) if len(ok) else None,
+        }
+
+    air = stats(err[err.surface == "cell_outer"])
+    water = stats(err[err.surface == "membrane"])
+    for cam in per_camera:
+        sel = err[err.camera == cam]
+        per_camera[cam]["air_median_px"] = stats(sel[sel.surface == "cell_outer"])["median_px"]
+        per_camera[cam]["water_median_px"] = stats(sel[sel.surface == "membrane"])["median_px"]
+    frames_ok = all(c["frames"] == scene_cfg.frames for c in per_camera.values())
+    ok = bool(frames_ok and air["median_px"] is not None and air["median_px"] <= 0.10
+              and water["median_px"] is not None and water["median_px"] <= 0.15)  # fmt: skip
+    report = {"test": meta["name"], "ok": ok, "frames_expected": scene_cfg.frames, "air_dots": air,
+              "membrane_dots": water, "cameras": per_camera}  # fmt: skip
+    if out_json is not None:
+        Path(out_json).write_text(json.dumps(report, indent=2))
+    return report

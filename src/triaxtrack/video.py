@@ -1,0 +1,516 @@
+"""Video I/O for 8-bit grayscale frames, through PyAV only (no system ffmpeg).
+
+Conventions used throughout this module:
+
+* A frame is a ``numpy.ndarray`` of dtype ``uint8`` and shape ``(H, W)`` (rows, columns),
+  values in digital numbers (DN) 0..255, full range (0 = black, 255 = white).
+* Frame ``k`` (0-based) of a video has presentation time ``k / fps`` seconds. Frame indices
+  reported by the readers are derived from the presentation timestamp
+  (``round((pts - start_time) * time_base * fps)``), so they are exact rather than counted.
+* Videos are written as H.264 (``libx264``) or H.265 (``libx265``), ``yuv420p`` with the
+  full-range flag set: the gray values go straight into the luma plane (no 16..235 range
+  squeeze) and the chroma planes are constant 128. Width and height must be even.
+
+Encoder settings are chosen so that separately encoded segments (same size, fps, codec, crf,
+preset, gop) can be joined by :func:`concat_videos` with a pure stream copy: no B-frames
+(``bframes=0``, so pts == dts and there is no reordering delay or edit list), closed GOPs,
+every segment starts with an IDR keyframe, and the codec headers (SPS/PPS, VPS for H.265)
+are fixed by the settings alone, so the extradata is byte-identical between segments.
+"""
+
+from __future__ import annotations
+
+import numbers
+import os
+from collections.abc import Iterable, Iterator, Sequence
+from fractions import Fraction
+from pathlib import Path
+from types import TracebackType
+from typing import Any
+
+import av
+import numpy as np
+
+__all__ = [
+    "CODECS",
+    "DEFAULT_GOP",
+    "VideoWriter",
+    "concat_videos",
+    "encode_video",
+    "iter_frames",
+    "probe_video",
+    "read_frame",
+]
+
+PathLike = str | os.PathLike[str]
+
+#: Public codec names accepted by the writers, mapped to the FFmpeg encoder used.
+CODECS: dict[str, str] = {"h264": "libx264", "h265": "libx265"}
+
+#: Default maximum keyframe interval, in frames. Random access (``iter_frames(start=...)``)
+#: decodes at most this many frames before the first requested one.
+DEFAULT_GOP = 60
+
+_AVCOL_RANGE_JPEG = 2  # AVColorRange value for full range (0..255)
+
+
+def _as_fps(fps: float | Fraction) -> Fraction:
+    """Convert a frame rate in frames/s to an exact positive ``Fraction``.
+
+    Floats are snapped to the nearest fraction with denominator <= 100000, so e.g.
+    ``30000 / 1001`` round-trips to ``Fraction(30000, 1001)``.
+    """
+    if isinstance(fps, bool) or not isinstance(fps, numbers.Real):
+        raise TypeError(f"fps must be a real number, got {type(fps).__name__}")
+    if isinstance(fps, numbers.Rational):
+        frac = Fraction(int(fps.numerator), int(fps.denominator))
+    else:
+        value = float(fps)
+        if not np.isfinite(value):
+            raise ValueError(f"fps must be finite, got {fps}")
+        frac = Fraction(value).limit_denominator(100_000)
+    if frac <= 0:
+        raise ValueError(f"fps must be > 0, got {fps}")
+    return frac
+
+
+def _encoder_options(codec: str, crf: int, preset: str, gop: int) -> dict[str, str]:
+    """Encoder private options (x264/x265) for the given settings; see the module docstring."""
+    if codec == "h264":
+        # bframes=0: no reordering, pts == dts, no edit list, every packet is one frame.
+        # open-gop=0 (x264 default, stated explicitly): segments start with a real IDR.
+        params = f"bframes=0:keyint={gop}:open-gop=0"
+        return {"crf": str(crf), "preset": preset, "x264-params": params}
+    # x265 defaults to open GOP (CRA) and B-frames; turn both off, and keep it quiet.
+    # info=0 drops x265's informational SEI from the headers: it lists every option incl.
+    # the machine-dependent thread counts, which would make the extradata of segments encoded
+    # on different machines differ (and concat_videos refuse them).
+    params = f"bframes=0:keyint={gop}:open-gop=0:info=0:log-level=error"
+    return {"crf": str(crf), "preset": preset, "x265-params": params}
+
+
+class VideoWriter:
+    """Write 8-bit grayscale frames to a video file (context manager).
+
+    Frame ``k`` written gets pts ``k`` in time base ``1 / fps``, i.e. time ``k / fps`` s.
+    The container is chosen from the file extension (use ``.mp4`` for :func:`concat_videos`).
+
+    Args:
+        path: output file path (parent directory must exist; an existing file is replaced).
+        width: frame width W in pixels (even, > 0).
+        height: frame height H in pixels (even, > 0).
+        fps: frame rate in frames/s (> 0; int, float or Fraction).
+        codec: ``"h264"`` (libx264) or ``"h265"`` (libx265).
+        crf: constant rate factor, 0 (lossless for x264) .. 51; lower = better quality.
+        preset: x264/x265 speed preset (e.g. ``"ultrafast"``, ``"veryfast"``, ``"medium"``).
+        gop: maximum keyframe interval in frames (keyword only).
+
+    Example::
+
+        with VideoWriter("out.mp4", 640, 480, fps=30) as w:
+            for img in frames:  # uint8 (480, 640)
+                w.write(img)
+    """
+
+    def __init__(
+        self,
+        path: PathLike,
+        width: int,
+        height: int,
+        fps: float | Fraction,
+        codec: str = "h264",
+        crf: int = 14,
+        preset: str = "veryfast",
+        *,
+        gop: int = DEFAULT_GOP,
+    ) -> None:
+        self.path = Path(path)
+        if codec not in CODECS:
+            raise ValueError(f"{self.path}: codec must be one of {sorted(CODECS)}, got {codec!r}")
+        for name, value in (("width", width), ("height", height)):
+            if isinstance(value, bool) or not isinstance(value, int | np.integer) or value <= 0:
+                raise ValueError(f"{self.path}: {name} must be a positive int, got {value!r}")
+            if value % 2:
+                raise ValueError(f"{self.path}: {name} must be even for yuv420p, got {value}")
+        if not 0 <= crf <= 51:
+            raise ValueError(f"{self.path}: crf must be in 0..51, got {crf}")
+        if gop < 1:
+            raise ValueError(f"{self.path}: gop must be >= 1, got {gop}")
+        self.width = int(width)
+        self.height = int(height)
+        self.fps = _as_fps(fps)
+        self.codec = codec
+        self.frames_written = 0
+        self._time_base = 1 / self.fps
+        # yuv420p staging buffer, shape (3H/2, W): luma rows on top, constant-128 chroma below.
+        self._yuv = np.full((self.height * 3 // 2, self.width), 128, dtype=np.uint8)
+        self._closed = False
+
+        try:
+            self._container: Any = av.open(str(self.path), mode="w")
+        except (av.FFmpegError, OSError) as exc:
+            raise ValueError(f"cannot open {self.path} for writing: {exc}") from exc
+        try:
+            stream = self._container.add_stream(
+                CODECS[codec],
+                rate=self.fps,
+                options=_encoder_options(codec, int(crf), preset, int(gop)),
+            )
+            stream.width = self.width
+            stream.height = self.height
+            stream.pix_fmt = "yuv420p"
+            stream.time_base = self._time_base
+            stream.codec_context.time_base = self._time_base
+            stream.codec_context.color_range = _AVCOL_RANGE_JPEG
+            # Open the encoder now so bad options fail here rather than on the first write.
+            stream.codec_context.open()
+        except av.FFmpegError as exc:
+            self._container.close()
+            raise ValueError(
+                f"cannot set up {CODECS[codec]} encoder for {self.path}: {exc}"
+            ) from exc
+        except Exception:
+            self._container.close()
+            raise
+        self._stream = stream
+
+    def write(self, frame: np.ndarray) -> None:
+        """Encode one grayscale frame, uint8 of shape ``(height, width)``; gets the next index."""
+        if self._closed:
+            raise ValueError(f"{self.path}: writer is closed")
+        if not isinstance(frame, np.ndarray):
+            raise ValueError(f"{self.path}: frame must be a numpy array, got {type(frame)}")
+        if frame.dtype != np.uint8:
+            raise ValueError(f"{self.path}: frame dtype must be uint8, got {frame.dtype}")
+        if frame.shape != (self.height, self.width):
+            raise ValueError(
+                f"{self.path}: frame shape must be (H, W) = {(self.height, self.width)}, "
+                f"got {frame.shape}"
+            )
+        self._yuv[: self.height] = frame
+        vf = av.VideoFrame.from_ndarray(self._yuv, format="yuv420p")  # copies the buffer
+        vf.pts = self.frames_written
+        vf.time_base = self._time_base
+        vf.duration = 1
+        vf.color_range = _AVCOL_RANGE_JPEG
+        for packet in self._stream.encode(vf):
+            self._container.mux(packet)
+        self.frames_written += 1
+
+    def close(self) -> None:
+        """Flush the encoder (no frame is lost) and finalize the file. Idempotent."""
+        if self._closed:
+            return
+        self._closed = True
+        try:
+            for packet in self._stream.encode(None):
+                self._container.mux(packet)
+        finally:
+            self._container.close()
+
+    def __enter__(self) -> VideoWriter:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.close()
+
+
+def encode_video(
+    frames: Iterable[np.ndarray],
+    path: PathLike,
+    fps: float | Fraction,
+    codec: str = "h264",
+    crf: int = 14,
+    *,
+    preset: str = "veryfast",
+    gop: int = DEFAULT_GOP,
+) -> int:
+    """Encode grayscale frames (uint8, all of shape ``(H, W)``) to ``path``.
+
+    The frame size is taken from the first frame; frames are consumed lazily (streaming).
+    Frame ``k`` gets time ``k / fps`` s. Returns the number of frames written (>= 1).
+    Raises ValueError if ``frames`` is empty or a frame has the wrong shape/dtype.
+    """
+    writer: VideoWriter | None = None
+    try:
+        for frame in frames:
+            if writer is None:
+                if not isinstance(frame, np.ndarray) or frame.ndim != 2:
+                    raise ValueError(
+                        f"{path}: frames must be 2-D (H, W) uint8 arrays, got "
+                        f"{getattr(frame, 'shape', type(frame))}"
+                    )
+                h, w = frame.shape
+                writer = VideoWriter(path, w, h, fps, codec=codec, crf=crf, preset=preset, gop=gop)
+            writer.write(frame)
+    finally:
+        if writer is not None:
+            writer.close()
+    if writer is None:
+        raise ValueError(f"{path}: no frames to encode")
+    return writer.frames_written
+
+
+# --------------------------------------------------------------------------- reading
+
+
+def _open_input(path: PathLike) -> Any:
+    """Open ``path`` for reading; FileNotFoundError / ValueError naming the file on failure."""
+    p = Path(path)
+    if not p.is_file():
+        raise FileNotFoundError(f"video file not found: {p}")
+    try:
+        container = av.open(str(p), mode="r")
+    except av.FFmpegError as exc:
+        raise ValueError(f"cannot read video {p}: {exc}") from exc
+    if not container.streams.video:
+        container.close()
+        raise ValueError(f"no video stream in {p}")
+    return container
+
+
+def _stream_fps(stream: Any, path: PathLike) -> Fraction:
+    """Exact frame rate (frames/s) of a video stream: average rate, else guessed/base rate."""
+    for rate in (stream.average_rate, stream.guessed_rate, stream.base_rate):
+        if rate is not None and rate > 0:
+            return Fraction(rate)
+    raise ValueError(f"cannot determine the frame rate of {path}")
+
+
+def _count_packets(container: Any, stream: Any) -> int:
+    """Number of (non-empty) packets of ``stream``, by demuxing only (no decoding)."""
+    return sum(1 for p in container.demux(stream) if p.size > 0)
+
+
+def probe_video(path: PathLike) -> dict[str, Any]:
+    """Describe the first video stream of ``path`` without decoding.
+
+    Returns a dict with keys:
+        ``frames`` (int): number of frames, from the container index (MP4 sample count) or,
+            if the container does not say, counted exactly by demuxing packets;
+        ``fps`` (float): frame rate, frames/s;
+        ``width``, ``height`` (int): frame size in pixels;
+        ``codec`` (str): FFmpeg codec name, e.g. ``"h264"`` or ``"hevc"``;
+        ``duration_s`` (float): stream duration in seconds (``frames / fps`` for CFR video).
+
+    Raises FileNotFoundError (missing file) or ValueError (unreadable / no video stream),
+    naming the file.
+    """
+    with _open_input(path) as container:
+        stream = container.streams.video[0]
+        fps = _stream_fps(stream, path)
+        frames = int(stream.frames or 0)
+        if frames <= 0:
+            try:
+                frames = _count_packets(container, stream)
+            except av.FFmpegError as exc:
+                raise ValueError(f"cannot read video {path}: {exc}") from exc
+        if stream.duration and stream.time_base:
+            duration_s = float(stream.duration * stream.time_base)
+        else:
+            duration_s = float(frames / fps)
+        ctx = stream.codec_context
+        return {
+            "frames": frames,
+            "fps": float(fps),
+            "width": int(ctx.width),
+            "height": int(ctx.height),
+            "codec": str(ctx.name),
+            "duration_s": duration_s,
+        }
+
+
+def _frame_index(pts: int, start: int, time_base: Fraction, fps: Fraction) -> int:
+    """Frame index of a timestamp: ``round((pts - start) * time_base * fps)``."""
+    return round((pts - start) * time_base * fps)
+
+
+def iter_frames(
+    path: PathLike, start: int = 0, stop: int | None = None
+) -> Iterator[tuple[int, np.ndarray]]:
+    """Stream decoded grayscale frames ``(k, frame)`` for ``start <= k < stop``.
+
+    ``frame`` is uint8 of shape ``(H, W)``; ``k`` is the exact frame index derived from the
+    pts (frame ``k`` is at ``k / fps`` s). For ``start > 0`` the reader seeks to the keyframe
+    at or before frame ``start`` and decodes forward, dropping earlier frames. ``stop=None``
+    reads to the end. Only one frame is held at a time (plus decoder buffers).
+
+    The file's existence and the arguments are checked immediately (FileNotFoundError /
+    ValueError); other read errors surface on iteration as ValueError naming the file.
+    """
+    if start < 0:
+        raise ValueError(f"start must be >= 0, got {start}")
+    if stop is not None and stop < 0:
+        raise ValueError(f"stop must be >= 0 or None, got {stop}")
+    if not Path(path).is_file():
+        raise FileNotFoundError(f"video file not found: {path}")
+    return _iter_frames(path, int(start), None if stop is None else int(stop))
+
+
+def _iter_frames(path: PathLike, start: int, stop: int | None) -> Iterator[tuple[int, np.ndarray]]:
+    if stop is not None and stop <= start:
+        return
+    seek = start > 0
+    while True:
+        with _open_input(path) as container:
+            stream = container.streams.video[0]
+            stream.thread_type = "AUTO"
+            fps = _stream_fps(stream, path)
+            time_base = Fraction(stream.time_base)
+            t0 = int(stream.start_time or 0)
+            if seek:
+                # Timestamp of frame `start` (floored); backward=True lands on the keyframe
+                # at or before it.
+                target = t0 + int(Fraction(start) / fps / time_base)
+                try:
+                    container.seek(target, stream=stream, backward=True)
+                except av.FFmpegError:
+                    seek = False  # unseekable: decode from the beginning instead
+            first = True
+            k = -1
+            try:
+                for frame in container.decode(stream):
+                    if frame.pts is None:
+                        k += 1  # no timestamp: assume the next frame
+                    else:
+                        k = _frame_index(frame.pts, t0, time_base, fps)
+                    if first and seek and k > start:
+                        break  # the seek overshot: retry from the beginning without seeking
+                    first = False
+                    if k < start:
+                        continue
+                    if stop is not None and k >= stop:
+                        return
+                    yield k, frame.to_ndarray(format="gray")
+                else:
+                    return
+            except av.FFmpegError as exc:
+                raise ValueError(f"error decoding {path}: {exc}") from exc
+        seek = False
+
+
+def read_frame(path: PathLike, index: int) -> np.ndarray:
+    """Decode the single grayscale frame ``index`` (uint8, ``(H, W)``) of ``path``.
+
+    Negative indices count from the end (uses :func:`probe_video`). Raises IndexError if the
+    video has no frame with that index.
+    """
+    if index < 0:
+        n = probe_video(path)["frames"]
+        if index + n < 0:
+            raise IndexError(f"frame index {index} out of range for {path} ({n} frames)")
+        index += n
+    for k, frame in iter_frames(path, index, index + 1):
+        if k == index:
+            return frame
+    raise IndexError(f"frame index {index} not found in {path}")
+
+
+# --------------------------------------------------------------------------- concatenation
+
+
+def _segment_signature(path: PathLike) -> dict[str, Any]:
+    """Stream parameters that must match for stream-copy concatenation; checks keyframe start."""
+    with _open_input(path) as container:
+        stream = container.streams.video[0]
+        ctx = stream.codec_context
+        sig = {
+            "codec": ctx.name,
+            "size": (int(ctx.width), int(ctx.height)),
+            "pix_fmt": ctx.pix_fmt,
+            "fps": _stream_fps(stream, path),
+            "extradata": bytes(ctx.extradata or b""),
+        }
+        for packet in container.demux(stream):
+            if packet.size > 0:
+                if not packet.is_keyframe:
+                    raise ValueError(f"segment {path} does not start with a keyframe")
+                break
+        else:
+            raise ValueError(f"segment {path} has no video packets")
+    return sig
+
+
+def concat_videos(segments: Sequence[PathLike], out_path: PathLike) -> int:
+    """Join video segments into one file by stream copy (no re-encoding); return frame count.
+
+    The segments must have been encoded separately with identical settings (e.g. by
+    :class:`VideoWriter` with the same size, fps, codec, crf, preset, gop); they are checked
+    to share codec, size, pixel format, frame rate and codec extradata (SPS/PPS/VPS), and to
+    start with a keyframe, before anything is written; a mismatch raises ValueError naming
+    the offending file. Packets are re-timestamped so that segment ``i``'s frames follow
+    segment ``i-1``'s: frame ``j`` of segment ``i`` becomes frame
+    ``sum(len(segment) for earlier segments) + j`` at time ``that_index / fps`` s.
+    The output container is chosen from ``out_path``'s extension (normally ``.mp4``).
+    """
+    if len(segments) == 0:
+        raise ValueError("concat_videos: no segments given")
+    out = Path(out_path)
+    for seg in segments:
+        if Path(seg).exists() and out.exists() and Path(seg).resolve() == out.resolve():
+            raise ValueError(f"output {out} is also an input segment")
+
+    ref = _segment_signature(segments[0])
+    for seg in segments[1:]:
+        sig = _segment_signature(seg)
+        for key, label in (
+            ("codec", "codec"),
+            ("size", "frame size (W, H)"),
+            ("pix_fmt", "pixel format"),
+            ("fps", "frame rate"),
+            ("extradata", "codec extradata (SPS/PPS: encoder settings)"),
+        ):
+            if sig[key] != ref[key]:
+                shown = (
+                    (f"{len(sig[key])} bytes", f"{len(ref[key])} bytes")
+                    if key == "extradata"
+                    else (sig[key], ref[key])
+                )
+                raise ValueError(
+                    f"segment {seg} does not match {segments[0]}: {label} {shown[0]} != {shown[1]}"
+                )
+
+    fps: Fraction = ref["fps"]
+    out_tb = 1 / fps
+    n_packets = 0
+    offset = 0  # index of the first frame of the current segment in the output
+    try:
+        with av.open(str(out), mode="w") as output:
+            with _open_input(segments[0]) as first:
+                ostream = output.add_stream_from_template(first.streams.video[0])
+            ostream.time_base = out_tb
+            for seg in segments:
+                with _open_input(seg) as container:
+                    stream = container.streams.video[0]
+                    tb = Fraction(stream.time_base)
+                    t0 = int(stream.start_time or 0)
+                    seg_fps = _stream_fps(stream, seg)
+                    last = -1
+                    for packet in container.demux(stream):
+                        if packet.size == 0 or (packet.pts is None and packet.dts is None):
+                            continue  # demuxer's end-of-stream flush packet
+                        pts = packet.pts if packet.pts is not None else packet.dts
+                        dts = packet.dts if packet.dts is not None else pts
+                        k_pts = _frame_index(pts, t0, tb, seg_fps)
+                        k_dts = _frame_index(dts, t0, tb, seg_fps)
+                        packet.stream = ostream
+                        packet.time_base = out_tb
+                        packet.pts = offset + k_pts
+                        packet.dts = offset + k_dts
+                        packet.duration = 1
+                        output.mux(packet)
+                        n_packets += 1
+                        last = max(last, k_pts)
+                    offset += last + 1
+    except av.FFmpegError as exc:
+        out.unlink(missing_ok=True)
+        raise ValueError(f"concatenation into {out} failed: {exc}") from exc
+    except BaseException:
+        out.unlink(missing_ok=True)
+        raise
+    return n_packets

@@ -1,0 +1,39 @@
+"""Shared fixtures: the default kit design and a tiny simulated test (built once per session)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from triaxtrack.kit import export_kit, load_design, target_table
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(scope="session")
+def design() -> dict:
+    return load_design(ROOT / "config" / "kit.yaml")
+
+
+@pytest.fixture(scope="session")
+def table(design):
+    return target_table(design)
+
+
+@pytest.fixture(scope="session")
+def kit_dir(design, tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("kit")
+    export_kit(design, out)
+    return out
+
+
+@pytest.fixture(scope="session")
+def small_test(kit_dir, tmp_path_factory) -> Path:
+    """3 cameras x 4 frames at 960x540, chunks of 3 frames (so two segments are joined)."""
+    from triaxtrack.simulate import SimulationConfig, simulate_test
+
+    out = tmp_path_factory.mktemp("sim") / "small"
+    cfg = SimulationConfig(cameras=3, frames=4, width=960, height=540, calibration_images=3, axial_strain=0.08)
+    simulate_test(cfg, kit_dir, out, "small", chunk_size=3)
+    return out
