@@ -34,6 +34,8 @@ def small_test(kit_dir, tmp_path_factory) -> Path:
     from triaxtrack.simulate import SimulationConfig, simulate_test
 
     out = tmp_path_factory.mktemp("sim") / "small"
-    cfg = SimulationConfig(cameras=3, frames=4, width=960, height=540, calibration_images=3, axial_strain=0.08)
+    cfg = SimulationConfig(
+        cameras=3, frames=4, width=960, height=540, calibration_images=3, axial_strain=0.08
+    )
     simulate_test(cfg, kit_dir, out, "small", chunk_size=3)
     return out

@@ -74,7 +74,9 @@ def test_water_projection_matches_brute_force_solver():
             return v - v @ path.dir_water[0] * path.dir_water[0]
 
         sol = least_squares(resid, x + [0.02, -0.015], xtol=1e-15, ftol=1e-15, gtol=1e-15)
-        uv_bf, _ = cv2.projectPoints(np.r_[sol.x, 1.0].reshape(1, 1, 3), np.zeros(3), np.zeros(3), cam.K, cam.dist)
+        uv_bf, _ = cv2.projectPoints(
+            np.r_[sol.x, 1.0].reshape(1, 1, 3), np.zeros(3), np.zeros(3), cam.K, cam.dist
+        )
         assert np.abs(uv_bf.reshape(2) - q).max() < 1e-6
 
 

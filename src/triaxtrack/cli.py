@@ -24,7 +24,11 @@ def _simulate(args: argparse.Namespace) -> int:
     from triaxtrack.kit import export_kit, load_design
     from triaxtrack.simulate import SimulationConfig, simulate_test
 
-    opts = {f.name: getattr(args, f.name) for f in fields(SimulationConfig) if getattr(args, f.name, None) is not None}
+    opts = {
+        f.name: getattr(args, f.name)
+        for f in fields(SimulationConfig)
+        if getattr(args, f.name, None) is not None
+    }
     cfg = SimulationConfig.from_dict(opts)
     out = Path(args.out)
     kit_dir = out / "kit"

@@ -75,7 +75,11 @@ class Deformation:
         """(3,) displacement of the top cap (and the top pedestal) at progress p, mm."""
         off = self.shear_mm * p
         return np.array(
-            [off * np.cos(self.shear_azimuth), off * np.sin(self.shear_azimuth), -self.axial_strain * p * self.height]
+            [
+                off * np.cos(self.shear_azimuth),
+                off * np.sin(self.shear_azimuth),
+                -self.axial_strain * p * self.height,
+            ]
         )
 
     def current_height(self, p: float) -> float:
@@ -110,9 +114,7 @@ class Deformation:
         _, lt, lz = self._frame(np.asarray(theta, float), np.asarray(Z, float), p)
         return self.membrane_thickness / (lt * lz)
 
-    def outer_surface(
-        self, theta: np.ndarray, Z: np.ndarray, p: float
-    ) -> tuple[np.ndarray, np.ndarray]:
+    def outer_surface(self, theta: np.ndarray, Z: np.ndarray, p: float) -> tuple[np.ndarray, np.ndarray]:
         """Printed-surface points (N, 3) and outward unit normals (N, 3) at material (theta, Z).
 
         In the undeformed state the printed surface is the cylinder of radius R0 + t0.

@@ -38,6 +38,7 @@ ARC_STEP_DEG = 5.0  # max angle between vertices along a code-ring arc
 BAND_STEP_DEG = 1.0  # max theta between vertices along a cell band edge
 BAND_STEP_Z = 5.0  # max z between vertices along a longitudinal band edge, mm
 SHEET_CHECK_BAR_MM = 100.0
+BOARD_PNG_PX_PER_MM = 10.0
 
 TARGET_COLUMNS = [
     "id", "kind", "surface", "theta_rad", "z_mm", "diameter_mm", "group", "large", "row", "col",
@@ -101,8 +102,17 @@ def target_table(design: dict) -> pd.DataFrame:
         z = face - st["z_from_face"] if st["surface"] == "pedestal_bottom" else face + st["z_from_face"]
         for i in range(st["count"]):
             th = np.deg2rad(ped["theta0"]) + 2 * np.pi * i / st["count"]
-            rows.append(dict(id=st["first_id"] + i, kind="coded", surface=st["surface"],
-                             theta_rad=th, z_mm=z, diameter_mm=ct_diam, group=st["name"]))
+            rows.append(
+                dict(
+                    id=st["first_id"] + i,
+                    kind="coded",
+                    surface=st["surface"],
+                    theta_rad=th,
+                    z_mm=z,
+                    diameter_mm=ct_diam,
+                    group=st["name"],
+                )
+            )
     cell = design["cell_targets"]
     ct_theta: dict[int, float] = {}
     ct_z: dict[str, float] = {}
@@ -111,8 +121,17 @@ def target_table(design: dict) -> pd.DataFrame:
         for i in range(st["count"]):
             th = np.deg2rad(cell["theta0"]) + 2 * np.pi * i / st["count"]
             ct_theta[st["first_id"] + i] = th
-            rows.append(dict(id=st["first_id"] + i, kind="coded", surface="cell_outer",
-                             theta_rad=th, z_mm=st["z"], diameter_mm=ct_diam, group=st["name"]))
+            rows.append(
+                dict(
+                    id=st["first_id"] + i,
+                    kind="coded",
+                    surface="cell_outer",
+                    theta_rad=th,
+                    z_mm=st["z"],
+                    diameter_mm=ct_diam,
+                    group=st["name"],
+                )
+            )
     per = cell["dots_per_ct"]
     stripes = {s["name"]: s for s in cell["ct_stripes"]}
     for ds in cell["dot_stripes"]:
@@ -138,8 +157,10 @@ def target_table(design: dict) -> pd.DataFrame:
     m = design["membrane"]
     for r in range(1, m["rows"] + 1):
         for c in range(1, m["columns"] + 1):
-            large = (r - m["large_first"]) % m["large_step"] == 0 and (
-                c - m["large_first"]) % m["large_step"] == 0 and r >= m["large_first"] and c >= m["large_first"]  # fmt: skip
+            on_grid = (r - m["large_first"]) % m["large_step"] == 0 and (c - m["large_first"]) % m[
+                "large_step"
+            ] == 0
+            large = on_grid and r >= m["large_first"] and c >= m["large_first"]
             rows.append(dict(
                 id=membrane_id(r, c, m), kind="dot", surface="membrane",
                 theta_rad=np.deg2rad(m["theta0"]) + 2 * np.pi * (c - 1) / m["columns"],
@@ -164,9 +185,9 @@ def membrane_id(r: int, c: int, membrane: dict) -> int:
 
 def large_dot_index(C: int, R: int, membrane: dict) -> tuple[int, int]:
     """Eqs. 2-3 as read by this kit: (c, r) of the R-th large dot under pedestal CT pair C."""
-    return (C - 1) * membrane["large_step"] + membrane["large_first"], (
-        R - 1
-    ) * membrane["large_step"] + membrane["large_first"]
+    return (C - 1) * membrane["large_step"] + membrane["large_first"], (R - 1) * membrane[
+        "large_step"
+    ] + membrane["large_first"]
 
 
 def eq1_dot_id(ct_id: int, design: dict) -> int:
@@ -397,7 +418,8 @@ def _svg_sheet(width_mm: float, height_mm: float, polys_black, polys_white, titl
         f'<svg xmlns="http://www.w3.org/2000/svg" width="{width_mm:.3f}mm" height="{total_h:.3f}mm" '
         f'viewBox="0 0 {width_mm:.4f} {total_h:.4f}">',
         f"<title>{title}</title>",
-        f'<rect x="0" y="0" width="{width_mm:.4f}" height="{height_mm:.4f}" fill="none" stroke="#aaa" stroke-width="0.1"/>',
+        f'<rect x="0" y="0" width="{width_mm:.4f}" height="{height_mm:.4f}" fill="none" '
+        'stroke="#aaa" stroke-width="0.1"/>',
     ]
     if polys_white:
         parts.append('<path fill="#fff" stroke="none" d="' + " ".join(path(p) for p in polys_white) + '"/>')
@@ -429,11 +451,13 @@ def export_kit(design: dict, out_dir: str | Path) -> None:
         "pedestal": dict(design["pedestal"]),
         "surfaces": [dict(s, texture_size=list(texture_size(s, ppm))) for s in surf],
         "texture_px_per_mm": ppm,
-        "coded_target": dict(ct, codes={str(k): format(v, f"0{ct['sectors']}b")[::-1]
-                                         for k, v in sorted(codes.items())},
-                             code_notes="bit string, sector 0 first; sector k spans "
-                                        "[2 pi k / n, 2 pi (k+1) / n) counter-clockwise from +theta "
-                                        "seen from outside; '1' is black"),  # fmt: skip
+        "coded_target": dict(
+            ct,
+            codes={str(k): format(v, f"0{ct['sectors']}b")[::-1] for k, v in sorted(codes.items())},
+            code_notes="bit string, sector 0 first; sector k spans "
+            "[2 pi k / n, 2 pi (k+1) / n) counter-clockwise from +theta "
+            "seen from outside; '1' is black",
+        ),  # fmt: skip
         "membrane": dict(design["membrane"]),
         "cell_targets": dict(design["cell_targets"]),
         "pedestal_targets": dict(design["pedestal_targets"]),
@@ -459,13 +483,12 @@ def export_kit(design: dict, out_dir: str | Path) -> None:
     offset = np.array([board["margin_mm"], board["margin_mm"]])
     (out / "board.json").write_text(json.dumps(dict(board, inner_corners=[
         board["squares_x"] - 1, board["squares_y"] - 1], units="mm"), indent=2))  # fmt: skip
-    (out / "sheets" / "board.svg").write_text(_svg_sheet(
-        sheet[:, 0].ptp() if hasattr(sheet, "ptp") else float(np.ptp(sheet[:, 0])),
-        float(np.ptp(sheet[:, 1])), [q + offset for q in squares], [], "calibration board"))  # fmt: skip
-    bpx = 10.0  # board.png: 10 px per mm
-    bw, bh = int(round(np.ptp(sheet[:, 0]) * bpx)), int(round(np.ptp(sheet[:, 1]) * bpx))
+    sheet_w, sheet_h = np.ptp(sheet, axis=0)
+    (out / "sheets" / "board.svg").write_text(
+        _svg_sheet(sheet_w, sheet_h, [q + offset for q in squares], [], "calibration board")
+    )
+    bpx = BOARD_PNG_PX_PER_MM
+    bw, bh = int(round(sheet_w * bpx)), int(round(sheet_h * bpx))
     cov = polygon_coverage([(q + offset) * bpx - 0.5 for q in squares], bh, bw)
     cv2.imwrite(str(out / "board.png"), np.round(255 * (1 - cov)).astype(np.uint8))
-    readme = Path(__file__).with_name("KIT_README.md")
-    if readme.exists():
-        shutil.copy(readme, out / "README.md")
+    shutil.copy(Path(__file__).with_name("KIT_README.md"), out / "README.md")

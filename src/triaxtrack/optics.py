@@ -96,9 +96,7 @@ def normalized_to_pixels(camera: Camera, xy: np.ndarray) -> np.ndarray:
     return uv.reshape(-1, 2)
 
 
-def intersect_cylinder(
-    origins: np.ndarray, dirs: np.ndarray, radius: float, entering: bool
-) -> np.ndarray:
+def intersect_cylinder(origins: np.ndarray, dirs: np.ndarray, radius: float, entering: bool) -> np.ndarray:
     """Ray parameter s > 0 where ``origins + s dirs`` meets the z-axis cylinder of ``radius``.
 
     ``entering`` picks the first crossing (from outside) or the second (leaving from inside).

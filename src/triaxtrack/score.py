@@ -55,21 +55,43 @@ def score_cameras(result: dict[str, Camera], truth: dict[str, Camera], tol: Scor
     rows = []
     for name, cam in sorted(result.items()):
         if name not in truth:
-            rows.append(dict(metric="camera_unknown", item=name, value=np.nan, tolerance=np.nan, unit="", passed=False))
+            rows.append(
+                dict(
+                    metric="camera_unknown", item=name, value=np.nan, tolerance=np.nan, unit="", passed=False
+                )
+            )
             continue
         tr = truth[name]
         f_err = max(abs(cam.K[0, 0] / tr.K[0, 0] - 1), abs(cam.K[1, 1] / tr.K[1, 1] - 1))
         pp = float(np.hypot(cam.K[0, 2] - tr.K[0, 2], cam.K[1, 2] - tr.K[1, 2]))
         rows.append(dict(metric="focal_rel_error", item=name, value=f_err, tolerance=tol.focal_rel, unit=""))
-        rows.append(dict(metric="principal_point_error", item=name, value=pp, tolerance=tol.principal_point_px, unit="px"))
+        rows.append(
+            dict(
+                metric="principal_point_error",
+                item=name,
+                value=pp,
+                tolerance=tol.principal_point_px,
+                unit="px",
+            )
+        )
         has_pose = not (np.allclose(cam.R, np.eye(3)) and np.allclose(cam.t, 0))
         if has_pose:
             dc = float(np.linalg.norm(cam.center - tr.center))
-            rows.append(dict(metric="camera_center_error", item=name, value=dc, tolerance=tol.camera_center_mm, unit="mm"))
+            rows.append(
+                dict(
+                    metric="camera_center_error",
+                    item=name,
+                    value=dc,
+                    tolerance=tol.camera_center_mm,
+                    unit="mm",
+                )
+            )
             rows.append(dict(metric="camera_rotation_error", item=name, value=rotation_angle_deg(cam.R, tr.R),
                              tolerance=tol.camera_rotation_deg, unit="deg"))  # fmt: skip
     for name in sorted(set(truth) - set(result)):
-        rows.append(dict(metric="camera_missing", item=name, value=np.nan, tolerance=np.nan, unit="", passed=False))
+        rows.append(
+            dict(metric="camera_missing", item=name, value=np.nan, tolerance=np.nan, unit="", passed=False)
+        )
     for r in rows:
         if "passed" not in r:
             r["passed"] = bool(np.isnan(r["tolerance"]) or r["value"] <= r["tolerance"])
@@ -91,7 +113,11 @@ def score(results_dir: str | Path, truth_dir: str | Path, tol: ScoreTolerances |
         raise ValueError(f"{results_dir}: no such results folder")
     parts = []
     if (results_dir / "cameras.json").exists():
-        parts.append(score_cameras(load_cameras(results_dir / "cameras.json"), load_cameras(truth_dir / "cameras.json"), tol))
+        parts.append(
+            score_cameras(
+                load_cameras(results_dir / "cameras.json"), load_cameras(truth_dir / "cameras.json"), tol
+            )
+        )
     if not parts:
         return pd.DataFrame(columns=["metric", "item", "value", "tolerance", "unit", "passed"])
     return pd.concat(parts, ignore_index=True)
@@ -105,6 +131,8 @@ def format_table(df: pd.DataFrame) -> str:
     for r in df.itertuples(index=False):
         tol = "" if pd.isna(r.tolerance) else f"{r.tolerance:.4g}"
         val = "missing" if pd.isna(r.value) else f"{r.value:.5g}"
-        lines.append(f"{r.metric:<26} {r.item:<8} {val:>12} {tol:>10} {r.unit:<4} {'ok' if r.passed else 'FAIL'}")
+        lines.append(
+            f"{r.metric:<26} {r.item:<8} {val:>12} {tol:>10} {r.unit:<4} {'ok' if r.passed else 'FAIL'}"
+        )
     lines.append(f"{int(df.passed.sum())} of {len(df)} within tolerance")
     return "\n".join(lines)

@@ -192,7 +192,9 @@ def load_kit_design(kit_dir: str | Path) -> dict:
     except (OSError, json.JSONDecodeError) as err:
         raise ValueError(f"{kit_dir}: not a readable kit export: {err}") from err
     design = {k: v for k, v in kit.items() if k not in ("surfaces", "n_targets", "units")}
-    design["coded_target"] = {k: v for k, v in kit["coded_target"].items() if k not in ("codes", "code_notes")}
+    design["coded_target"] = {
+        k: v for k, v in kit["coded_target"].items() if k not in ("codes", "code_notes")
+    }
     design["board"] = {k: v for k, v in board.items() if k not in ("inner_corners", "units")}
     return design
 
@@ -242,7 +244,7 @@ def make_scene(cfg: SimulationConfig, kit_dir: str | Path, test_dir: str | Path,
     test_dir = Path(test_dir)
     (test_dir / "truth").mkdir(parents=True, exist_ok=True)
     if Path(kit_dir).resolve() != (test_dir / "kit").resolve():
-        shutil.copytree(kit_dir, test_dir / "kit", dirs_exist_ok=True)
+        shutil.copytree(kit_dir, test_dir / "kit", dirs_exist_ok=True, ignore=shutil.ignore_patterns(".*"))
     design = load_kit_design(test_dir / "kit")
     deformation = deformation_for(cfg, design)
     cams = make_cameras(cfg)
@@ -319,7 +321,13 @@ def _strip_polygons(a: np.ndarray, b: np.ndarray, front: np.ndarray) -> tuple[np
     of facing quads becomes one polygon; quads with non-finite corners end a run.
     """
     n = len(front)
-    ok = front & np.isfinite(a[:-1]).all(1) & np.isfinite(a[1:]).all(1) & np.isfinite(b[:-1]).all(1) & np.isfinite(b[1:]).all(1)
+    ok = (
+        front
+        & np.isfinite(a[:-1]).all(1)
+        & np.isfinite(a[1:]).all(1)
+        & np.isfinite(b[:-1]).all(1)
+        & np.isfinite(b[1:]).all(1)
+    )
     if not ok.any():
         return np.zeros((0, 2)), np.zeros(0, np.int64)
     if ok.all():
@@ -403,7 +411,8 @@ class CameraRenderer:
         cos = self._facing(cpts, cnrm, cd2, in_water)
         keep = cos > 0
         vsel = np.repeat(keep, shapes.counts)
-        vpts, _ = _surface_points(sc, shapes.surface, shapes.theta_z, p)
+        vpts = np.full((len(shapes.theta_z), 3), np.nan)
+        vpts[vsel] = _surface_points(sc, shapes.surface, shapes.theta_z[vsel], p)[0]
         vuv, _ = self._project(f"{shapes.surface}/{shapes.layer}/v", vpts, in_water, vsel)
         return vuv[vsel], shapes.counts[keep], keep, cuv, cos
 
@@ -500,7 +509,9 @@ class CameraRenderer:
         df = pd.DataFrame({"id": ids_kept, "u0": lo[:, 0], "v0": lo[:, 1], "u1": hi[:, 0], "v1": hi[:, 1]})
         box = df.groupby("id").agg(u0=("u0", "min"), v0=("v0", "min"), u1=("u1", "max"), v1=("v1", "max"))
         m = EDGE_MARGIN_PX
-        inside = (box.u0 >= m) & (box.v0 >= m) & (box.u1 <= cam.width - 1 - m) & (box.v1 <= cam.height - 1 - m)
+        inside = (
+            (box.u0 >= m) & (box.v0 >= m) & (box.u1 <= cam.width - 1 - m) & (box.v1 <= cam.height - 1 - m)
+        )
         box = box[inside & np.isfinite(box).all(axis=1)]
         centre = pd.DataFrame({"id": shapes.ids, "u_px": cuv[:, 0], "v_px": cuv[:, 1], "cos": cos})
         centre = centre.drop_duplicates("id").set_index("id").loc[box.index]
@@ -508,7 +519,9 @@ class CameraRenderer:
         if shapes.surface != "cell_outer" and band_cov is not None and len(centre):
             b = box.loc[centre.index]
             hidden = [
-                band_cov[int(np.floor(r.v0)) : int(np.ceil(r.v1)) + 1, int(np.floor(r.u0)) : int(np.ceil(r.u1)) + 1].max()
+                band_cov[
+                    int(np.floor(r.v0)) : int(np.ceil(r.v1)) + 1, int(np.floor(r.u0)) : int(np.ceil(r.u1)) + 1
+                ].max()
                 > OCCLUSION_TOL
                 for r in b.itertuples()
             ]
@@ -534,7 +547,12 @@ class CameraRenderer:
 
 
 def render_chunk(
-    test_dir: str | Path, camera: str, start: int, stop: int, video_out: str | Path, observations_out: str | Path
+    test_dir: str | Path,
+    camera: str,
+    start: int,
+    stop: int,
+    video_out: str | Path,
+    observations_out: str | Path,
 ) -> None:
     """Render frames ``[start, stop)`` of one camera: an H.264/H.265 segment and its truth."""
     scene = load_scene(test_dir)
@@ -542,7 +560,9 @@ def render_chunk(
     cam = scene.cameras[camera]
     obs = []
     Path(video_out).parent.mkdir(parents=True, exist_ok=True)
-    with VideoWriter(video_out, cam.width, cam.height, scene.cfg.fps, codec=scene.cfg.codec, crf=scene.cfg.crf) as vw:
+    with VideoWriter(
+        video_out, cam.width, cam.height, scene.cfg.fps, codec=scene.cfg.codec, crf=scene.cfg.crf
+    ) as vw:
         for k in range(start, stop):
             img, o = rend.render(k)
             vw.write(img)
@@ -551,7 +571,9 @@ def render_chunk(
 
 
 # ---------------------------------------------------------------- calibration images
-def board_poses(cfg: SimulationConfig, camera: Camera, board: dict, n: int) -> list[tuple[np.ndarray, np.ndarray]]:
+def board_poses(
+    cfg: SimulationConfig, camera: Camera, board: dict, n: int
+) -> list[tuple[np.ndarray, np.ndarray]]:
     """Seeded board poses (R, t board -> camera) filling the image at varied tilts and distances."""
     rng = np.random.default_rng([cfg.seed, zlib.crc32(camera.name.encode()), 7])
     sheet, _ = board_polygons_mm(board)
@@ -575,16 +597,21 @@ def board_poses(cfg: SimulationConfig, camera: Camera, board: dict, n: int) -> l
         t = np.array([x, y, dist]) - R @ centre
         uv = project_air(Camera("b", camera.width, camera.height, camera.K, camera.dist, R, t), corners)
         pc = corners @ R.T + t
-        if (pc[:, 2] > 50).all() and (uv >= 10).all() and (uv[:, 0] <= camera.width - 11).all() and (
-            uv[:, 1] <= camera.height - 11
-        ).all():
+        if (
+            (pc[:, 2] > 50).all()
+            and (uv >= 10).all()
+            and (uv[:, 0] <= camera.width - 11).all()
+            and (uv[:, 1] <= camera.height - 11).all()
+        ):
             poses.append((R, t))
     if len(poses) < n:
         raise RuntimeError(f"could not place {n} calibration boards for {camera.name}")
     return poses
 
 
-def render_board_image(camera: Camera, board: dict, R: np.ndarray, t: np.ndarray, noise: float, rng) -> np.ndarray:
+def render_board_image(
+    camera: Camera, board: dict, R: np.ndarray, t: np.ndarray, noise: float, rng
+) -> np.ndarray:
     """uint8 image of the checkerboard at pose (R, t) seen by ``camera`` (exact, distorted)."""
     bcam = Camera("b", camera.width, camera.height, camera.K, camera.dist, R, t)
     sheet, squares = board_polygons_mm(board, subdivide=8)
@@ -615,7 +642,9 @@ def render_calibration(test_dir: str | Path, camera: str, out_dir: str | Path) -
         img = render_board_image(cam, board, R, t, scene.cfg.noise_sigma, rng)
         cv2.imwrite(str(out_dir / f"{i + 1:02d}.png"), img)
         uv = project_air(Camera("b", cam.width, cam.height, cam.K, cam.dist, R, t), board_corners_mm(board))
-        record.append({"image": f"{i + 1:02d}.png", "R": R.tolist(), "t": t.tolist(), "corners_px": uv.tolist()})
+        record.append(
+            {"image": f"{i + 1:02d}.png", "R": R.tolist(), "t": t.tolist(), "corners_px": uv.tolist()}
+        )
     truth = test_dir / "truth" / "calibration"
     truth.mkdir(parents=True, exist_ok=True)
     (truth / f"{camera}.json").write_text(json.dumps({"board_poses": record}))
@@ -713,7 +742,9 @@ def check_simulation(test_dir: str | Path, out_json: str | Path | None = None) -
     from triaxtrack.video import probe_video, read_frame
 
     test_dir = Path(test_dir)
-    scene_cfg = SimulationConfig.from_dict(json.loads((test_dir / "truth" / "scene.json").read_text())["simulation"])
+    scene_cfg = SimulationConfig.from_dict(
+        json.loads((test_dir / "truth" / "scene.json").read_text())["simulation"]
+    )
     meta = yaml.safe_load((test_dir / "test.yaml").read_text())
     rows, per_camera = [], {}
     for cam in meta["cameras"]:

@@ -166,9 +166,7 @@ class VideoWriter:
             stream.codec_context.open()
         except av.FFmpegError as exc:
             self._container.close()
-            raise ValueError(
-                f"cannot set up {CODECS[codec]} encoder for {self.path}: {exc}"
-            ) from exc
+            raise ValueError(f"cannot set up {CODECS[codec]} encoder for {self.path}: {exc}") from exc
         except Exception:
             self._container.close()
             raise
@@ -184,8 +182,7 @@ class VideoWriter:
             raise ValueError(f"{self.path}: frame dtype must be uint8, got {frame.dtype}")
         if frame.shape != (self.height, self.width):
             raise ValueError(
-                f"{self.path}: frame shape must be (H, W) = {(self.height, self.width)}, "
-                f"got {frame.shape}"
+                f"{self.path}: frame shape must be (H, W) = {(self.height, self.width)}, got {frame.shape}"
             )
         self._yuv[: self.height] = frame
         vf = av.VideoFrame.from_ndarray(self._yuv, format="yuv420p")  # copies the buffer
@@ -330,9 +327,7 @@ def _frame_index(pts: int, start: int, time_base: Fraction, fps: Fraction) -> in
     return round((pts - start) * time_base * fps)
 
 
-def iter_frames(
-    path: PathLike, start: int = 0, stop: int | None = None
-) -> Iterator[tuple[int, np.ndarray]]:
+def iter_frames(path: PathLike, start: int = 0, stop: int | None = None) -> Iterator[tuple[int, np.ndarray]]:
     """Stream decoded grayscale frames ``(k, frame)`` for ``start <= k < stop``.
 
     ``frame`` is uint8 of shape ``(H, W)``; ``k`` is the exact frame index derived from the

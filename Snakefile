@@ -1,0 +1,31 @@
+"""triaxtrack: continuous 3-D deformation of triaxial soil specimens from multi-camera video.
+
+    snakemake --cores 2                          # the tests of config/config.yaml (default: demo)
+    snakemake --cores 2 --config test=PATH       # one recorded test folder
+    snakemake --profile profiles/slurm           # on a SLURM cluster
+
+Outputs under results/<test>/, the kit under results/kit/; logs/ and benchmarks/ per job.
+"""
+
+from snakemake.utils import min_version
+
+min_version("8.0")
+
+
+configfile: "config/config.yaml"
+
+
+include: "workflow/rules/common.smk"
+include: "workflow/rules/kit.smk"
+include: "workflow/rules/simulate.smk"
+include: "workflow/rules/inventory.smk"
+
+
+localrules:
+    all,
+
+
+rule all:
+    default_target: True
+    input:
+        get_final_outputs(),

@@ -1,0 +1,52 @@
+"""Inventory of a recorded test: what each camera's video holds, and which cameras disagree."""
+
+from __future__ import annotations
+
+from collections import Counter
+
+FPS_REL_TOL = 1e-3  # container frame rates are rationals; 1e-3 absorbs 30000/1001 vs 29.97
+
+
+def summarize_probes(test: dict, probes: list[dict], name: str) -> dict:
+    """Summarise per-camera video probes (:func:`triaxtrack.video.probe_video`) of a test.
+
+    ``test`` is the validated ``test.yaml`` with ``cameras`` as a list of mappings (``name``,
+    optional ``start_offset_s`` and ``dropped_frames``), in the order of ``probes``. The expected
+    frame count is test.yaml's ``frames`` if given, else the most common count (ties: the larger).
+    Cameras whose frame count, frame rate or size differ are flagged.
+    """
+    counts = Counter(p["frames"] for p in probes)
+    if "frames" in test:
+        expected_frames, frames_source = test["frames"], "test.yaml"
+    else:
+        expected_frames = max(counts, key=lambda n: (counts[n], n))
+        frames_source = "most common among the videos"
+    sizes = Counter((p["width"], p["height"]) for p in probes)
+    expected_size = max(sizes, key=lambda s: (sizes[s], s))
+    cameras = []
+    for camera, probe in zip(test["cameras"], probes, strict=True):
+        flags = []
+        if probe["frames"] != expected_frames:
+            flags.append("frame_count_differs")
+        if abs(probe["fps"] - test["fps"]) > FPS_REL_TOL * test["fps"]:
+            flags.append("fps_differs")
+        if (probe["width"], probe["height"]) != expected_size:
+            flags.append("size_differs")
+        cameras.append({
+            "camera": camera["name"],
+            **probe,
+            "start_offset_s": camera.get("start_offset_s", 0.0),
+            "dropped_frames": len(camera.get("dropped_frames", [])),
+            "flags": flags,
+        })  # fmt: skip
+    return {
+        "test": name,
+        "fps": test["fps"],
+        "frames": expected_frames,
+        "frames_source": frames_source,
+        "width": expected_size[0],
+        "height": expected_size[1],
+        "cameras": cameras,
+        "frame_count_differs": [c["camera"] for c in cameras if "frame_count_differs" in c["flags"]],
+        "flagged": [c["camera"] for c in cameras if c["flags"]],
+    }

@@ -1,0 +1,237 @@
+"""Workflow tests: dry-run job counts, test-folder parsing, lint and format checks, and one
+tiny end-to-end run (in a copy of the workflow, so nothing is written to the repository).
+
+Dry runs use `--forceall` so the counts do not depend on what results/ already holds, and
+`--nolock` so they can run beside a real run of the workflow.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import yaml
+
+REPO = Path(__file__).resolve().parents[1]
+TIMEOUT_S = 300
+
+
+def _env() -> dict[str, str]:
+    """The environment of the test run, with the repository's src/ importable."""
+    path = os.pathsep.join(p for p in (str(REPO / "src"), os.environ.get("PYTHONPATH")) if p)
+    return {**os.environ, "PYTHONPATH": path}
+
+
+def run_snakemake(*args: str, workdir: Path = REPO) -> subprocess.CompletedProcess:
+    """`snakemake ARGS` with this interpreter's Snakemake, in `workdir`; never raises."""
+    return subprocess.run(
+        [sys.executable, "-m", "snakemake", "--directory", str(workdir), *args],
+        cwd=workdir,
+        env=_env(),
+        capture_output=True,
+        text=True,
+        timeout=TIMEOUT_S,
+    )
+
+
+def job_counts(output: str) -> dict[str, int]:
+    """Parse the "Job stats" table of a Snakemake run into {rule: count}."""
+    counts: dict[str, int] = {}
+    stats = output.split("Job stats:", 1)
+    assert len(stats) == 2, f"no job stats in the output:\n{output}"
+    for line in stats[1].splitlines()[3:]:
+        match = re.fullmatch(r"(\w+)\s+(\d+)", line.strip())
+        if not match:
+            break
+        counts[match[1]] = int(match[2])
+    return counts
+
+
+def dry_run(*args: str) -> dict[str, int]:
+    proc = run_snakemake("-n", "--forceall", "--nolock", "--quiet", "rules", *args)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    return job_counts(proc.stdout + proc.stderr)
+
+
+def write_yaml(path: Path, data: dict) -> Path:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(yaml.safe_dump(data, sort_keys=False))
+    return path
+
+
+def recorded_folder(root: Path, test_yaml: dict) -> Path:
+    """A recorded test folder: test.yaml and an (empty) video per camera."""
+    write_yaml(root / "test.yaml", test_yaml)
+    (root / "videos").mkdir()
+    for camera in test_yaml.get("cameras", []):
+        name = camera if isinstance(camera, str) else camera["name"]
+        (root / "videos" / f"{name}.mp4").touch()
+    return root
+
+
+# ---------------------------------------------------------------- dry runs
+
+
+def test_default_config_is_demo_13_cameras_2_chunks():
+    counts = dry_run()
+    assert counts["render_video_chunk"] == 13 * 2
+    assert counts["join_camera_video"] == 13
+    assert counts["render_calibration"] == 13
+    assert counts["simulate_scene"] == counts["simulate_truth"] == counts["check_simulation"] == 1
+    assert counts["make_kit"] == 1
+
+
+def test_simulated_jobs_are_cameras_times_chunks(tmp_path):
+    config = write_yaml(
+        tmp_path / "config.yaml",
+        {
+            "chunk_size": 4,
+            "tests": [{"name": "wf-sim", "simulate": {"cameras": 3, "frames": 10}}],
+        },
+    )
+    counts = dry_run("--configfile", str(config))
+    assert counts["render_video_chunk"] == 3 * 3  # chunks 0000..0002: 4 + 4 + 2 frames
+    assert counts["join_camera_video"] == 3
+    assert counts["render_calibration"] == 3
+    assert counts["simulate_truth"] == 1
+    assert counts["check_simulation"] == 1
+    assert "probe_video" not in counts
+
+
+def test_one_recorded_folder_from_the_command_line(tmp_path):
+    folder = recorded_folder(
+        tmp_path / "rec",
+        {
+            "name": "wf-rec",
+            "fps": 30,
+            "frames": 30,
+            "cameras": ["camA", {"name": "camB", "start_offset_s": 0.02, "dropped_frames": [7]}],
+        },
+    )
+    counts = dry_run("--config", f"test={folder}")
+    assert counts["probe_video"] == 2
+    assert counts["inventory"] == 1
+    assert "simulate_scene" not in counts and "render_video_chunk" not in counts
+
+
+def test_simulated_and_recorded_tests_together(tmp_path):
+    folder = recorded_folder(tmp_path / "rec", {"name": "ignored", "fps": 25, "cameras": ["a", "b", "c"]})
+    config = write_yaml(
+        tmp_path / "config.yaml",
+        {
+            "chunk_size": 50,
+            "tests": [
+                {"name": "wf-sim", "simulate": {"cameras": 4, "frames": 120}},
+                {"name": "wf-rec", "path": str(folder)},
+            ],
+        },
+    )
+    counts = dry_run("--configfile", str(config))
+    assert counts["render_video_chunk"] == 4 * 3
+    assert counts["probe_video"] == 3
+
+
+def test_invalid_test_yaml_names_the_file(tmp_path):
+    folder = recorded_folder(tmp_path / "bad", {"name": "wf-bad", "cameras": ["camA"]})
+    proc = run_snakemake("-n", "--nolock", "--config", f"test={folder}")
+    output = proc.stdout + proc.stderr
+    assert proc.returncode != 0
+    assert str(folder / "test.yaml") in output
+    assert "'fps' is a required property" in output
+
+
+@pytest.mark.parametrize(
+    "tests",
+    [
+        [{"name": "both", "simulate": {}, "path": "somewhere"}],
+        [{"name": "kit", "simulate": {}}],
+        [{"name": "bad/name", "simulate": {}}],
+        [{"name": "x", "simulate": {"cameras": 2}}],
+        [{"name": "x", "simulate": {"no_such_setting": 1}}],
+        [{"name": "x", "simulate": {}}, {"name": "x", "simulate": {"seed": 2}}],
+    ],
+    ids=["simulate-and-path", "reserved-name", "slash-in-name", "too-few-cameras",
+         "unknown-setting", "duplicate-name"],
+)  # fmt: skip
+def test_invalid_config_is_rejected_at_parse_time(tmp_path, tests):
+    config = write_yaml(tmp_path / "config.yaml", {"tests": tests})
+    proc = run_snakemake("-n", "--nolock", "--configfile", str(config))
+    assert proc.returncode != 0
+    assert "Error" in proc.stdout + proc.stderr
+
+
+# ---------------------------------------------------------------- lint and format
+
+
+def test_snakemake_lint_is_clean():
+    proc = run_snakemake("--lint", "--nolock")
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert "Lints for" not in proc.stdout + proc.stderr
+
+
+def test_snakefmt_is_clean():
+    proc = subprocess.run(
+        [sys.executable, "-m", "snakefmt", "--check", "Snakefile", "workflow/"],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        timeout=TIMEOUT_S,
+    )
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+
+
+# ---------------------------------------------------------------- end to end
+
+
+def test_tiny_simulation_end_to_end_then_inventory(tmp_path):
+    """Simulate a tiny test in a copy of the workflow, then take its folder as a recorded test.
+    About 15 s: 3 cameras x 3 frames at 320 x 180, two chunks per camera."""
+    work = tmp_path / "work"
+    work.mkdir()
+    shutil.copy(REPO / "Snakefile", work)
+    shutil.copytree(REPO / "workflow", work / "workflow")
+    shutil.copytree(REPO / "config", work / "config")
+    config = write_yaml(
+        work / "tiny.yaml",
+        {
+            "chunk_size": 2,
+            "tests": [
+                {
+                    "name": "tiny",
+                    "simulate": {
+                        "cameras": 3,
+                        "frames": 3,
+                        "width": 320,
+                        "height": 180,
+                        "calibration_images": 1,
+                    },
+                }
+            ],
+        },
+    )
+    proc = run_snakemake("--cores", "2", "--configfile", str(config), workdir=work)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert job_counts(proc.stdout + proc.stderr)["render_video_chunk"] == 3 * 2
+    test_dir = work / "results" / "tiny" / "simulated"
+    for camera in ("cam01", "cam02", "cam03"):
+        assert (test_dir / "videos" / f"{camera}.mp4").is_file()
+        assert any((test_dir / "calibration" / camera).glob("*.png"))
+        assert (work / "logs" / "tiny" / "render_video_chunk" / camera / "0001.log").is_file()
+    check = json.loads((work / "results" / "tiny" / "simulation_check.json").read_text())
+    assert check["frames_expected"] == 3
+    assert all(c["frames"] == 3 for c in check["cameras"].values())
+    assert not list((work / "results" / "tiny" / "sim_chunks").rglob("*.mp4"))  # temp()
+
+    proc = run_snakemake(
+        "--cores", "2", "--configfile", str(config), "--config", f"test={test_dir}", workdir=work
+    )  # fmt: skip
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    inventory = json.loads((work / "results" / "tiny" / "inventory.json").read_text())
+    assert [c["camera"] for c in inventory["cameras"]] == ["cam01", "cam02", "cam03"]
+    assert inventory["frames"] == 3 and inventory["frame_count_differs"] == []

@@ -1,0 +1,307 @@
+"""Shared parse-time logic: config validation, the tests, cameras, chunks, input functions.
+
+Everything a rule needs that depends on wildcards is a `get_*` function here, so rules stay
+declarative (no lambdas). Paths are relative to the working directory (the repository root).
+"""
+
+import math
+import os
+import re
+from functools import cache
+from pathlib import Path
+
+import jsonschema
+import yaml
+from snakemake.exceptions import WorkflowError
+from snakemake.utils import validate
+
+validate(config, "../schemas/config.schema.yaml")
+
+TEST_SCHEMA_PATH = workflow.source_path("../schemas/test.schema.yaml")
+KIT_DIR = "results/kit"
+# simulated cameras are cam01..camNN (the schema caps NN at 32)
+CAMERA_NAME_DIGITS = 2
+# chunk ids are 0000, 0001, ...: keep in step with the `chunk` wildcard constraint
+CHUNK_ID_DIGITS = 4
+
+
+wildcard_constraints:
+    test=r"[A-Za-z0-9_.-]+",
+    camera=r"[A-Za-z0-9_.-]+",
+    chunk=r"\d{4}",
+
+
+# ---------------------------------------------------------------- recorded test folders
+
+
+def _test_validator():
+    with open(TEST_SCHEMA_PATH) as f:
+        schema = yaml.safe_load(f)
+    return jsonschema.Draft202012Validator(schema)
+
+
+def _error_order(error):
+    return error.json_path
+
+
+def load_test_yaml(folder):
+    """Read and validate FOLDER/test.yaml; return it with `cameras` as a list of mappings
+    (`{"name": ...}` plus the optional per-camera keys) and `kit` defaulted to "kit".
+    Raises WorkflowError naming the file on any problem."""
+    path = Path(folder) / "test.yaml"
+    if not path.is_file():
+        raise WorkflowError(f"recorded test folder {folder!s}: {path} not found")
+    try:
+        with open(path) as f:
+            doc = yaml.safe_load(f)
+    except yaml.YAMLError as exc:
+        raise WorkflowError(f"{path}: not valid YAML: {exc}") from exc
+    errors = sorted(_test_validator().iter_errors(doc), key=_error_order)
+    if errors:
+        lines = [f"  at {e.json_path}: {e.message}" for e in errors]
+        raise WorkflowError(
+            f"{path} does not match workflow/schemas/test.schema.yaml:\n"
+            + "\n".join(lines)
+        )
+    cameras = [c if isinstance(c, dict) else {"name": c} for c in doc["cameras"]]
+    names = [c["name"] for c in cameras]
+    duplicates = sorted({n for n in names if names.count(n) > 1})
+    if duplicates:
+        raise WorkflowError(f"{path}: camera names listed more than once: {duplicates}")
+    return {**doc, "cameras": cameras, "kit": doc.get("kit", "kit")}
+
+
+# ---------------------------------------------------------------- the tests
+
+
+def _collect_tests():
+    """name -> spec. A spec has either `simulate` (overrides of config["simulation"]) or
+    `path` (a recorded test folder) and `recorded` (its validated test.yaml).
+    `--config test=PATH` replaces the `tests` list by that one recorded folder."""
+    if config.get("test"):
+        entries = [{"path": config["test"]}]
+    else:
+        entries = config["tests"]
+    tests = {}
+    for entry in entries:
+        if "simulate" in entry:
+            name = entry["name"]
+            spec = {"simulate": dict(entry["simulate"])}
+        else:
+            folder = os.path.normpath(entry["path"])
+            recorded = load_test_yaml(folder)
+            name = entry.get("name", recorded["name"])
+            spec = {"path": folder, "recorded": recorded}
+        if name in tests:
+            raise WorkflowError(f"config: test name {name!r} is used more than once")
+        tests[name] = spec
+    return tests
+
+
+TESTS = _collect_tests()
+SIMULATED = [name for name, spec in TESTS.items() if "simulate" in spec]
+RECORDED = [name for name, spec in TESTS.items() if "path" in spec]
+
+
+def _one_of(names):
+    """A wildcard regex matching exactly these names (none: a regex that never matches)."""
+    return "|".join(re.escape(name) for name in names) or "(?!)"
+
+
+# Constraints of the `test` wildcard, set per rule, so that the simulation rules only match
+# simulated tests and the inventory rules only recorded ones. Without them, a recorded test whose
+# folder is a simulated one (`--config test=results/demo/simulated`) would make Snakemake
+# ask the simulation rules (and their input functions) about its files.
+SIMULATED_TEST = _one_of(SIMULATED)
+RECORDED_TEST = _one_of(RECORDED)
+
+
+def _spec(test):
+    try:
+        return TESTS[test]
+    except KeyError:
+        raise WorkflowError(
+            f"unknown test {test!r}; configured: {sorted(TESTS)}"
+        ) from None
+
+
+def _sim_config(test):
+    spec = _spec(test)
+    if "simulate" not in spec:
+        raise WorkflowError(f"test {test!r} is a recorded test, not a simulated one")
+    return {**config["simulation"], **spec["simulate"]}
+
+
+def get_sim_config(wildcards):
+    """Simulation settings of a simulated test: config["simulation"] with the test's
+    `simulate` overrides applied key by key (fields of triaxtrack.simulate.SimulationConfig).
+    """
+    return _sim_config(wildcards.test)
+
+
+def get_test_dir(test):
+    """The test folder (test-folder.md): results/<test>/simulated for simulated tests, the
+    configured folder for recorded ones."""
+    spec = _spec(test)
+    if "simulate" in spec:
+        return str(Path("results") / test / "simulated")
+    return spec["path"]
+
+
+def get_cameras(test):
+    """Camera names: cam01..camNN for simulated tests, test.yaml's order for recorded ones."""
+    spec = _spec(test)
+    if "simulate" in spec:
+        n = _sim_config(test)["cameras"]
+        return [f"cam{i:0{CAMERA_NAME_DIGITS}d}" for i in range(1, n + 1)]
+    return [c["name"] for c in spec["recorded"]["cameras"]]
+
+
+@cache
+def get_frames(test):
+    """Frames per video: from the simulation settings, from test.yaml `frames`, or else by
+    probing the first camera's video (at parse time, once per test)."""
+    spec = _spec(test)
+    if "simulate" in spec:
+        return _sim_config(test)["frames"]
+    if "frames" in spec["recorded"]:
+        return spec["recorded"]["frames"]
+    from triaxtrack.video import probe_video
+
+    return int(probe_video(_recorded_video(test, get_cameras(test)[0]))["frames"])
+
+
+def get_chunks(test):
+    """Chunk ids "0000", "0001", ... covering the frames in blocks of config["chunk_size"]."""
+    n = math.ceil(get_frames(test) / config["chunk_size"])
+    if n > 10**CHUNK_ID_DIGITS:
+        raise WorkflowError(f"test {test!r}: {n} chunks; raise chunk_size")
+    return [f"{i:0{CHUNK_ID_DIGITS}d}" for i in range(n)]
+
+
+def get_chunk_frames(wildcards):
+    """Frame range of one chunk: dict(start=..., stop=...), stop exclusive."""
+    if wildcards.chunk not in get_chunks(wildcards.test):
+        raise WorkflowError(f"test {wildcards.test!r} has no chunk {wildcards.chunk}")
+    size = config["chunk_size"]
+    start = int(wildcards.chunk) * size
+    return {"start": start, "stop": min(start + size, get_frames(wildcards.test))}
+
+
+# ---------------------------------------------------------------- input functions: simulation
+
+
+def get_camera_chunk_videos(wildcards):
+    """All chunk videos of one simulated camera, in frame order."""
+    return expand(
+        "results/{test}/sim_chunks/{camera}/{chunk}.mp4",
+        test=wildcards.test,
+        camera=wildcards.camera,
+        chunk=get_chunks(wildcards.test),
+    )
+
+
+def get_chunk_observations(wildcards):
+    """Truth observations of every chunk of every camera of a simulated test."""
+    return expand(
+        "results/{test}/sim_chunks/{camera}/{chunk}.parquet",
+        test=wildcards.test,
+        camera=get_cameras(wildcards.test),
+        chunk=get_chunks(wildcards.test),
+    )
+
+
+def get_sim_videos(wildcards):
+    """The joined video of every camera of a simulated test."""
+    return expand(
+        "results/{test}/simulated/videos/{camera}.mp4",
+        test=wildcards.test,
+        camera=get_cameras(wildcards.test),
+    )
+
+
+def get_sim_calibrations(wildcards):
+    """The calibration image folder of every camera of a simulated test."""
+    return expand(
+        "results/{test}/simulated/calibration/{camera}",
+        test=wildcards.test,
+        camera=get_cameras(wildcards.test),
+    )
+
+
+def get_sim_board_poses(wildcards):
+    """The true calibration-board poses of every camera of a simulated test."""
+    return expand(
+        "results/{test}/simulated/truth/calibration/{camera}.json",
+        test=wildcards.test,
+        camera=get_cameras(wildcards.test),
+    )
+
+
+# ---------------------------------------------------------------- input functions: recorded
+
+
+def _recorded_video(test, camera):
+    return str(Path(get_test_dir(test)) / "videos" / f"{camera}.mp4")
+
+
+def get_recorded_video(wildcards):
+    """TEST_DIR/videos/<camera>.mp4 of a recorded test."""
+    return _recorded_video(wildcards.test, wildcards.camera)
+
+
+def get_recorded_test_yaml(wildcards):
+    """TEST_DIR/test.yaml of a recorded test."""
+    return str(Path(get_test_dir(wildcards.test)) / "test.yaml")
+
+
+def get_recorded_spec(wildcards):
+    """The validated test.yaml of a recorded test (cameras as mappings)."""
+    spec = _spec(wildcards.test)
+    if "recorded" not in spec:
+        raise WorkflowError(f"test {wildcards.test!r} is simulated, not recorded")
+    return spec["recorded"]
+
+
+def get_inventory_probes(wildcards):
+    """The probe of every camera's video of a recorded test, in test.yaml's camera order."""
+    return expand(
+        "results/{test}/inventory/{camera}.json",
+        test=wildcards.test,
+        camera=get_cameras(wildcards.test),
+    )
+
+
+# ---------------------------------------------------------------- targets
+
+
+def get_final_outputs():
+    """Everything the default target builds: the kit; per simulated test its test folder and
+    simulation_check.json; per recorded test its inventory.json."""
+    outputs = [KIT_DIR]
+    for test in SIMULATED:
+        outputs += expand(
+            [
+                "results/{test}/simulated/test.yaml",
+                "results/{test}/simulated/kit",
+                "results/{test}/simulated/truth/cameras.json",
+                "results/{test}/simulated/truth/volume.parquet",
+                "results/{test}/simulated/truth/scene.json",
+                "results/{test}/simulated/truth/points.parquet",
+                "results/{test}/simulated/truth/observations.parquet",
+                "results/{test}/simulation_check.json",
+            ],
+            test=test,
+        )
+        outputs += expand(
+            [
+                "results/{test}/simulated/videos/{camera}.mp4",
+                "results/{test}/simulated/calibration/{camera}",
+                "results/{test}/simulated/truth/calibration/{camera}.json",
+            ],
+            test=test,
+            camera=get_cameras(test),
+        )
+    for test in RECORDED:
+        outputs += expand("results/{test}/inventory.json", test=test)
+    return outputs

@@ -1,0 +1,166 @@
+# Simulated tests: write a synthetic test folder results/{test}/simulated (test-folder.md),
+# rendering the videos chunk by chunk and joining them per camera.
+
+
+rule simulate_scene:
+    """Lay out the cameras and the deforming specimen; write test.yaml, kit/ (a copy of
+    results/kit) and the static truth."""
+    input:
+        kit="results/kit",
+    output:
+        test_yaml="results/{test}/simulated/test.yaml",
+        cameras="results/{test}/simulated/truth/cameras.json",
+        volume="results/{test}/simulated/truth/volume.parquet",
+        scene="results/{test}/simulated/truth/scene.json",
+        kit=directory("results/{test}/simulated/kit"),
+    log:
+        "logs/{test}/simulate_scene/simulate_scene.log",
+    benchmark:
+        "benchmarks/{test}/simulate_scene/simulate_scene.tsv"
+    wildcard_constraints:
+        test=SIMULATED_TEST,
+    conda:
+        "../envs/triaxtrack.yaml"
+    threads: 1
+    resources:
+        mem_mb=2000,
+        runtime=15,
+    params:
+        sim=get_sim_config,
+        name="{test}",
+    script:
+        "../scripts/simulate_scene.py"
+
+
+rule render_video_chunk:
+    """Render one chunk of frames of one camera: a video segment and its exact observations."""
+    input:
+        kit="results/{test}/simulated/kit",
+        test_yaml="results/{test}/simulated/test.yaml",
+        cameras="results/{test}/simulated/truth/cameras.json",
+        scene="results/{test}/simulated/truth/scene.json",
+    output:
+        video=temp("results/{test}/sim_chunks/{camera}/{chunk}.mp4"),
+        observations="results/{test}/sim_chunks/{camera}/{chunk}.parquet",
+    log:
+        "logs/{test}/render_video_chunk/{camera}/{chunk}.log",
+    benchmark:
+        "benchmarks/{test}/render_video_chunk/{camera}/{chunk}.tsv"
+    wildcard_constraints:
+        test=SIMULATED_TEST,
+    conda:
+        "../envs/triaxtrack.yaml"
+    threads: 1
+    resources:
+        mem_mb=2000,
+        runtime=30,
+    params:
+        frames=get_chunk_frames,
+    script:
+        "../scripts/render_video_chunk.py"
+
+
+rule join_camera_video:
+    """Join one camera's chunk videos into videos/{camera}.mp4 (stream copy)."""
+    input:
+        segments=get_camera_chunk_videos,
+    output:
+        video="results/{test}/simulated/videos/{camera}.mp4",
+    log:
+        "logs/{test}/join_camera_video/{camera}.log",
+    benchmark:
+        "benchmarks/{test}/join_camera_video/{camera}.tsv"
+    wildcard_constraints:
+        test=SIMULATED_TEST,
+    conda:
+        "../envs/triaxtrack.yaml"
+    threads: 1
+    resources:
+        mem_mb=1000,
+        runtime=10,
+    script:
+        "../scripts/join_camera_video.py"
+
+
+rule render_calibration:
+    """Render one camera's calibration-board images, and their board poses into truth/."""
+    input:
+        kit="results/{test}/simulated/kit",
+        test_yaml="results/{test}/simulated/test.yaml",
+        cameras="results/{test}/simulated/truth/cameras.json",
+        scene="results/{test}/simulated/truth/scene.json",
+    output:
+        calibration=directory("results/{test}/simulated/calibration/{camera}"),
+        board_poses="results/{test}/simulated/truth/calibration/{camera}.json",
+    log:
+        "logs/{test}/render_calibration/{camera}.log",
+    benchmark:
+        "benchmarks/{test}/render_calibration/{camera}.tsv"
+    wildcard_constraints:
+        test=SIMULATED_TEST,
+    conda:
+        "../envs/triaxtrack.yaml"
+    threads: 1
+    resources:
+        mem_mb=2000,
+        runtime=20,
+    script:
+        "../scripts/render_calibration.py"
+
+
+rule simulate_truth:
+    """Gather the chunk observations into truth/points.parquet and truth/observations.parquet."""
+    input:
+        kit="results/{test}/simulated/kit",
+        test_yaml="results/{test}/simulated/test.yaml",
+        cameras="results/{test}/simulated/truth/cameras.json",
+        scene="results/{test}/simulated/truth/scene.json",
+        chunks=get_chunk_observations,
+    output:
+        points="results/{test}/simulated/truth/points.parquet",
+        observations="results/{test}/simulated/truth/observations.parquet",
+    log:
+        "logs/{test}/simulate_truth/simulate_truth.log",
+    benchmark:
+        "benchmarks/{test}/simulate_truth/simulate_truth.tsv"
+    wildcard_constraints:
+        test=SIMULATED_TEST,
+    conda:
+        "../envs/triaxtrack.yaml"
+    threads: 1
+    resources:
+        mem_mb=4000,
+        runtime=15,
+    script:
+        "../scripts/simulate_truth.py"
+
+
+rule check_simulation:
+    """Check the finished synthetic test folder against its truth; write a JSON report."""
+    input:
+        kit="results/{test}/simulated/kit",
+        test_yaml="results/{test}/simulated/test.yaml",
+        cameras="results/{test}/simulated/truth/cameras.json",
+        volume="results/{test}/simulated/truth/volume.parquet",
+        scene="results/{test}/simulated/truth/scene.json",
+        points="results/{test}/simulated/truth/points.parquet",
+        observations="results/{test}/simulated/truth/observations.parquet",
+        videos=get_sim_videos,
+        calibration=get_sim_calibrations,
+        board_poses=get_sim_board_poses,
+    output:
+        json="results/{test}/simulation_check.json",
+    log:
+        "logs/{test}/check_simulation/check_simulation.log",
+    benchmark:
+        "benchmarks/{test}/check_simulation/check_simulation.tsv"
+    wildcard_constraints:
+        test=SIMULATED_TEST,
+    conda:
+        "../envs/triaxtrack.yaml"
+    threads: 1
+    resources:
+        mem_mb=4000,
+        runtime=30,
+    script:
+        "../scripts/check_simulation.py"
