@@ -36,10 +36,10 @@ def test_air_projection_is_opencv():
 
 def test_both_refractions_obey_snell():
     cam, pts = ring_camera(), membrane_points()
-    uv, d2, xy = project_water(cam, pts, CELL)
+    uv, d2, sol = project_water(cam, pts, CELL)
     ok = np.isfinite(uv).all(axis=1)
     assert ok.mean() > 0.95
-    path = trace_into_water(cam, xy[ok], CELL)
+    path = trace_into_water(cam, sol.xy[ok], CELL)
 
     def sin_and_plane(d_in, d_out, p):
         n = np.c_[p[:, 0], p[:, 1], np.zeros(len(p))]
@@ -57,14 +57,14 @@ def test_both_refractions_obey_snell():
     # and the water ray passes through the point
     v = pts[ok] - path.inner_hit
     off = v - np.einsum("ij,ij->i", v, path.dir_water)[:, None] * path.dir_water
-    assert np.linalg.norm(off, axis=1).max() < 1e-7
+    assert np.linalg.norm(off, axis=1).max() < 1e-6  # the solver's tolerance
 
 
 def test_water_projection_matches_brute_force_solver():
-    """An independent solve (scipy least squares from a far start) agrees to 1e-6 px."""
+    """An independent solve (scipy least squares from a far start) agrees to 1e-5 px."""
     cam, pts = ring_camera(phi=-1.1), membrane_points(20, seed=3, phi=-1.1)
-    uv, _, xy = project_water(cam, pts, CELL)
-    for p, q, x in zip(pts, uv, xy, strict=True):
+    uv, _, sol = project_water(cam, pts, CELL)
+    for p, q, x in zip(pts, uv, sol.xy, strict=True):
         if not np.isfinite(q).all():
             continue
 
@@ -77,7 +77,7 @@ def test_water_projection_matches_brute_force_solver():
         uv_bf, _ = cv2.projectPoints(
             np.r_[sol.x, 1.0].reshape(1, 1, 3), np.zeros(3), np.zeros(3), cam.K, cam.dist
         )
-        assert np.abs(uv_bf.reshape(2) - q).max() < 1e-6
+        assert np.abs(uv_bf.reshape(2) - q).max() < 1e-5
 
 
 def test_refraction_matters_by_pixels():
@@ -94,3 +94,14 @@ def test_no_refraction_reduces_to_pinhole():
     uv, _, _ = project_water(cam, pts, flat)
     ok = np.isfinite(uv).all(axis=1)
     assert np.abs(uv[ok] - project_air(cam, pts[ok])).max() < 1e-6
+
+
+def test_warm_start_with_cached_jacobian_gives_the_same_answer():
+    cam, pts = ring_camera(), membrane_points(200, seed=5)
+    _, _, first = project_water(cam, pts, CELL)
+    moved = pts + [0.05, -0.03, -0.07]  # one frame of deformation
+    cold, _, _ = project_water(cam, moved, CELL)
+    warm, _, _ = project_water(cam, moved, CELL, first.xy, first.pinv)
+    ok = np.isfinite(cold).all(axis=1)
+    assert ok.sum() > 150 and np.isfinite(warm[ok]).all()
+    assert np.abs(cold[ok] - warm[ok]).max() < 1e-5

@@ -115,3 +115,42 @@ def test_observations_are_deterministic(small_test):
     obs = obs.sort_values("id")
     assert list(ref.id) == list(obs.id)
     assert np.abs(ref.u_px.to_numpy() - obs.u_px.to_numpy()).max() < 1e-6
+
+
+def test_small_membrane_dot_is_at_least_6_px_at_1080p(design):
+    """Default cameras at 1920x1080: a small membrane dot facing a camera spans >= 6 px."""
+    from triaxtrack.kit import _disc
+    from triaxtrack.optics import project_water
+    from triaxtrack.simulate import cell_optics, make_cameras
+
+    cam = make_cameras(SimulationConfig(width=1920, height=1080))[0]
+    theta = np.arctan2(cam.center[1], cam.center[0])
+    r = design["specimen"]["diameter"] / 2 + design["specimen"]["membrane_thickness"]
+    ring = _disc(design["membrane"]["small_dot_diameter"] / 2)
+    pts = np.c_[r * np.cos(theta + ring[:, 0] / r), r * np.sin(theta + ring[:, 0] / r), 71.1 + ring[:, 1]]
+    uv, _, _ = project_water(cam, pts, cell_optics(design))
+    width, height = np.ptp(uv, axis=0)
+    print(f"small membrane dot at 1920x1080: {width:.2f} x {height:.2f} px")
+    assert min(width, height) >= 6.0
+
+
+def test_cell_wall_dots_land_where_opencv_projects_them(noiseless_frame):
+    """Rendered cell-wall dot centroids vs cv2.projectPoints of their design positions."""
+    import cv2
+
+    scene, img, _ = noiseless_frame
+    cam = scene.cameras["cam01"]
+    t = scene.table
+    dots = t[(t.surface == "cell_outer") & (t.kind == "dot")]
+    r = scene.design["cell"]["outer_radius"]
+    xyz = np.c_[r * np.cos(dots.theta_rad), r * np.sin(dots.theta_rad), dots.z_mm]
+    facing = (xyz[:, :2] * (cam.center[:2] - xyz[:, :2])).sum(axis=1) > 0.8 * r * np.linalg.norm(
+        cam.center[:2] - xyz[:, :2], axis=1
+    )
+    uv, _ = cv2.projectPoints(xyz[facing], cv2.Rodrigues(cam.R)[0], cam.t, cam.K, cam.dist)
+    uv = uv.reshape(-1, 2)
+    inside = (uv[:, 0] > 10) & (uv[:, 0] < cam.width - 10) & (uv[:, 1] > 10) & (uv[:, 1] < cam.height - 10)
+    err = np.linalg.norm(local_centroid(img, uv[inside]) - uv[inside], axis=1)
+    err = err[np.isfinite(err)]
+    assert len(err) > 30
+    assert np.median(err) < 0.03

@@ -127,21 +127,34 @@ def paint(
     Only the band of rows the polygons touch is rasterised. Returns the new image and the
     (height, width) coverage (zero outside the band).
     """
+    out = image.copy()
+    r0, band = paint_into(out, vertices, counts, value, subrows)
+    cov = np.zeros(image.shape)
+    cov[r0 : r0 + len(band)] = band
+    return out, cov
+
+
+def paint_into(
+    image: np.ndarray, vertices: np.ndarray, counts: np.ndarray, value: float, subrows: int = DEFAULT_SUBROWS
+) -> tuple[int, np.ndarray]:
+    """In-place :func:`paint` for a renderer's own frame buffer.
+
+    Returns ``(r0, band)``: the coverage of rows ``r0 : r0 + len(band)`` (the rows the polygons
+    touch); ``image`` is updated there.
+    """
     h, w = image.shape
-    cov = np.zeros((h, w))
     v = np.asarray(vertices, np.float64)
     fin = v[np.isfinite(v).all(axis=1)]
     if len(fin) == 0:
-        return image.copy(), cov
+        return 0, np.zeros((0, w))
     r0 = int(np.clip(np.floor(fin[:, 1].min()) - 1, 0, h))
     r1 = int(np.clip(np.ceil(fin[:, 1].max()) + 2, 0, h))
     if r1 <= r0:
-        return image.copy(), cov
+        return 0, np.zeros((0, w))
     band = packed_polygon_coverage(v - [0.0, r0], counts, r1 - r0, w, subrows)
-    cov[r0:r1] = band
-    out = image.copy()
-    out[r0:r1] = image[r0:r1] * (1.0 - band) + value * band
-    return out, cov
+    sub = image[r0:r1]
+    sub += band * (value - sub)
+    return r0, band
 
 
 def composite(image: np.ndarray, coverage: np.ndarray, value: float) -> np.ndarray:
