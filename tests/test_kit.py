@@ -127,3 +127,28 @@ def test_target_centre_is_centroid_of_printed_texels(kit_dir, surface):
         errs.append(np.hypot((win * xs).sum() / win.sum() - u, (win * ys).sum() / win.sum() - v))
     assert len(errs) > 150
     assert max(errs) < 0.05
+
+
+def test_sheets_print_targets_across_theta_zero(kit_dir):
+    """CT 17 sits at theta = 0: its sheet prints it whole, split over both ends of the sheet."""
+    import re
+
+    svg = (kit_dir / "sheets" / "pedestal_bottom.svg").read_text()
+    width = float(re.search(r'width="([\d.]+)mm"', svg).group(1))
+    xs = np.array([float(x) for x in re.findall(r"[ML]([-\d.]+),", svg)])
+    assert xs.min() < 0 and xs.max() > width  # copies on both sides of the seam
+
+
+def test_pedestal_theta0_must_be_zero(design):
+    from triaxtrack.kit import target_table
+
+    bad = {**design, "pedestal_targets": {**design["pedestal_targets"], "theta0": 5.0}}
+    with pytest.raises(ValueError, match="CT 17"):
+        target_table(bad)
+
+
+def test_codes_read_back_from_the_export(kit_dir, design, table):
+    from triaxtrack.kit import ct_codes
+    from triaxtrack.simulate import load_kit_design
+
+    assert ct_codes(load_kit_design(kit_dir), table) == ct_codes(design, table)

@@ -11,6 +11,9 @@ distance to every kept word, minimised over all rotations, is at least ``min_dis
 that equal one of their own non-trivial rotations (periodic) and words with fewer than three
 ones or zeros are excluded. With 17 sectors and distance 3 this yields 218 codes; IDs are
 assigned the first codes in order, so the table is reproducible from (n, min_distance) alone.
+Distance 3 corrects one misread sector; it does not detect two (a two-sector misread can land
+within distance 1 of another code), so a reader must reject targets whose sectors it cannot read
+with confidence rather than rely on the code to catch them.
 """
 
 from __future__ import annotations
@@ -26,11 +29,6 @@ def rotations(word: int, n: int) -> list[int]:
     """All ``n`` cyclic rotations of an ``n``-bit word."""
     mask = (1 << n) - 1
     return [((word << k) | (word >> (n - k))) & mask for k in range(n)]
-
-
-def canonical(word: int, n: int) -> int:
-    """The smallest rotation of ``word``: the necklace's code word."""
-    return min(rotations(word, n))
 
 
 def necklace_distance(a: int, b: int, n: int) -> int:

@@ -36,6 +36,9 @@ from triaxtrack.raster import equal_area_radius, polygon_coverage
 DOT_VERTICES = 16  # vertices of a printed dot: an equal-area 16-gon (exact area, symmetric)
 ARC_STEP_DEG = 5.0  # max angle between vertices along a code-ring arc
 BAND_STEP_DEG = 1.0  # max theta between vertices along a cell band edge
+BAND_PIECE_DEG = 2.0  # annular bands are drawn as pieces this wide, so back faces can be culled
+LABEL_VERTICES = 48  # white label disc behind a pedestal CT
+CT_CENTRE_VERTICES = 32
 BAND_STEP_Z = 5.0  # max z between vertices along a longitudinal band edge, mm
 SHEET_CHECK_BAR_MM = 100.0
 BOARD_PNG_PX_PER_MM = 10.0
@@ -95,6 +98,8 @@ def target_table(design: dict) -> pd.DataFrame:
     """
     rows: list[dict] = []
     sp, ped, ct = design["specimen"], design["pedestal_targets"], design["coded_target"]
+    if ped["theta0"] != 0:
+        raise ValueError("pedestal_targets.theta0 must be 0: CT 17 defines +x of the cell frame")
     h = sp["height"]
     ct_diam = 2 * ct["ring_outer_radius"]
     for st in ped["stripes"]:
@@ -202,8 +207,14 @@ def eq1_dot_id(ct_id: int, design: dict) -> int:
 
 
 def ct_codes(design: dict, table: pd.DataFrame) -> dict[int, int]:
-    """Code word of every coded target ID."""
+    """Code word of every coded target ID.
+
+    A design read back from a kit export carries the printed codes (``coded_target.codes``:
+    bit strings, sector 0 first); those are authoritative. A design file gets the family's codes.
+    """
     ct = design["coded_target"]
+    if "codes" in ct:
+        return {int(k): int(bits[::-1], 2) for k, bits in ct["codes"].items()}
     ids = sorted(int(i) for i in table.loc[table.kind == "coded", "id"])
     return code_table(ids, ct["sectors"], ct["min_distance"])
 
@@ -249,7 +260,7 @@ def coded_target_polygons(word: int, ct: dict) -> list[np.ndarray]:
     """Ink polygons of one CT in its print frame (a, b), mm: centre dot and code-ring runs."""
     n = ct["sectors"]
     bits = bits_of(word, n)
-    polys = [_disc(ct["centre_radius"], 32)]
+    polys = [_disc(ct["centre_radius"], CT_CENTRE_VERTICES)]
     # runs of ones (cyclic) -> one annular sector each
     start = int(np.argmin(bits)) if bits.min() == 0 else 0
     order = [(start + k) % n for k in range(n)]
@@ -293,7 +304,14 @@ def printed_shapes(design: dict, table: pd.DataFrame | None = None) -> list[Shap
     for row in table.itertuples(index=False):
         if row.kind == "coded":
             if row.surface != "cell_outer":  # the cell's CTs sit on the white band
-                add(row.surface, "label", row.id, [_disc(ct["label_radius"], 48)], row.theta_rad, row.z_mm)
+                add(
+                    row.surface,
+                    "label",
+                    row.id,
+                    [_disc(ct["label_radius"], LABEL_VERTICES)],
+                    row.theta_rad,
+                    row.z_mm,
+                )
             add(row.surface, "ink", row.id, coded_target_polygons(codes[row.id], ct), row.theta_rad, row.z_mm)
         else:
             add(row.surface, "ink", row.id, [_disc(row.diameter_mm / 2)], row.theta_rad, row.z_mm)
@@ -311,10 +329,13 @@ def cell_bands(design: dict, table: pd.DataFrame) -> list[np.ndarray]:
     for cs in cell["ct_stripes"]:
         top = cs["z"] + ct["ring_outer_radius"] + m
         bottom = cs["z"] - cell["dot_offset"] - cell["large_dot_diameter"] / 2 - m
-        n = int(np.ceil(360 / 2.0))  # 2-degree pieces
+        n = int(np.ceil(360 / BAND_PIECE_DEG))
+        per_piece = int(np.ceil(BAND_PIECE_DEG / BAND_STEP_DEG)) + 1
         for k in range(n):
-            t = np.linspace(2 * np.pi * k / n, 2 * np.pi * (k + 1) / n, 3)
-            out.append(np.vstack([np.c_[t, np.full(3, bottom)], np.c_[t[::-1], np.full(3, top)]]))
+            t = np.linspace(2 * np.pi * k / n, 2 * np.pi * (k + 1) / n, per_piece)
+            out.append(
+                np.vstack([np.c_[t, np.full(per_piece, bottom)], np.c_[t[::-1], np.full(per_piece, top)]])
+            )
     rad = design["cell"]["outer_radius"]
     half = cell["longitudinal_band_width"] / 2 / rad
     d = cell["longitudinal_dot_diameter"] / 2 + m
@@ -469,12 +490,18 @@ def export_kit(design: dict, out_dir: str | Path) -> None:
         rgba = render_texture(design, s["name"], shapes)
         cv2.imwrite(str(out / s["texture"]), cv2.cvtColor(rgba, cv2.COLOR_RGBA2BGRA))
         black, white = [], []
+        width = 2 * np.pi * s["radius"]
         for sh in shapes:
             if sh.surface != s["name"]:
                 continue
             ab = np.c_[sh.theta_z[:, 0] * s["radius"], s["z_max"] - sh.theta_z[:, 1]]
-            (white if sh.layer == "label" else black).extend(sh.polygons(ab))
-        width = 2 * np.pi * s["radius"]
+            for poly in sh.polygons(ab):  # shapes across theta = 0 are printed at both ends
+                copies = [poly] + [
+                    poly + [k * width, 0]
+                    for k in (-1, 1)
+                    if (poly[:, 0] + k * width).min() < width and (poly[:, 0] + k * width).max() > 0
+                ]
+                (white if sh.layer == "label" else black).extend(copies)
         (out / "sheets" / f"{s['name']}.svg").write_text(
             _svg_sheet(width, s["z_max"] - s["z_min"], black, white, f"triaxtrack kit: {s['name']}")
         )

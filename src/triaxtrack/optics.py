@@ -114,7 +114,7 @@ def intersect_cylinder(origins: np.ndarray, dirs: np.ndarray, radius: float, ent
     with np.errstate(invalid="ignore", divide="ignore"):
         sq = np.sqrt(disc)
         s = (-b - sq) / (2 * a) if entering else (-b + sq) / (2 * a)
-    return np.where((disc >= 0) & (a > 0), s, np.nan)
+    return np.where((disc >= 0) & (a > 0) & (s > 0), s, np.nan)
 
 
 def refract(dirs: np.ndarray, normals: np.ndarray, n1: float, n2: float) -> np.ndarray:
@@ -194,7 +194,8 @@ def solve_water_rays(
 ) -> WaterSolution:
     """Normalised image coordinates of the refracted rays through points in the water.
 
-    Gauss-Newton on the point's offset from the traced ray, with finite-difference Jacobians.
+    Gauss-Newton on the point's offset from the traced ray, with finite-difference Jacobians;
+    converged when the point is within ``NEWTON_TOL_MM`` of its refracted ray.
     With ``pinv0`` (the ``pinv`` of a previous solve for nearby points, e.g. the last frame) the
     iteration first takes chord steps with it (one ray trace per step) and recomputes the
     Jacobian only for points that have not converged after two such steps.

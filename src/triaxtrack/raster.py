@@ -21,12 +21,6 @@ import numpy as np
 DEFAULT_SUBROWS = 16  # y sampling: centroid error under 0.008 px for 6 px dots
 
 
-def signed_area(poly: np.ndarray) -> float:
-    """Shoelace area of an (N, 2) polygon; negative when its left edges run down (+y)."""
-    x, y = poly[:, 0], poly[:, 1]
-    return 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(np.roll(x, -1), y))
-
-
 def polygon_coverage(
     polygons: Sequence[np.ndarray],
     height: int,

@@ -50,51 +50,34 @@ def rotation_angle_deg(Ra: np.ndarray, Rb: np.ndarray) -> float:
     return float(np.degrees(np.arccos(np.clip(c, -1.0, 1.0))))
 
 
+def _metric(metric: str, item: str, value: float, tolerance: float = np.nan, unit: str = "") -> dict:
+    """One score row; it passes when within tolerance, or when only reported (no tolerance)."""
+    passed = bool(np.isfinite(value) and (np.isnan(tolerance) or value <= tolerance))
+    return dict(metric=metric, item=item, value=value, tolerance=tolerance, unit=unit, passed=passed)
+
+
 def score_cameras(result: dict[str, Camera], truth: dict[str, Camera], tol: ScoreTolerances) -> pd.DataFrame:
-    """Per-camera intrinsic and pose errors of estimated cameras against the true ones."""
+    """Per-camera intrinsic and pose errors of estimated cameras against the true ones.
+
+    A camera whose pose is the identity (intrinsics only, e.g. after calibration) is scored on
+    its intrinsics alone. Cameras missing from, or unknown to, the truth fail.
+    """
     rows = []
     for name, cam in sorted(result.items()):
         if name not in truth:
-            rows.append(
-                dict(
-                    metric="camera_unknown", item=name, value=np.nan, tolerance=np.nan, unit="", passed=False
-                )
-            )
+            rows.append(_metric("camera_unknown", name, np.nan))
             continue
         tr = truth[name]
         f_err = max(abs(cam.K[0, 0] / tr.K[0, 0] - 1), abs(cam.K[1, 1] / tr.K[1, 1] - 1))
         pp = float(np.hypot(cam.K[0, 2] - tr.K[0, 2], cam.K[1, 2] - tr.K[1, 2]))
-        rows.append(dict(metric="focal_rel_error", item=name, value=f_err, tolerance=tol.focal_rel, unit=""))
-        rows.append(
-            dict(
-                metric="principal_point_error",
-                item=name,
-                value=pp,
-                tolerance=tol.principal_point_px,
-                unit="px",
-            )
-        )
-        has_pose = not (np.allclose(cam.R, np.eye(3)) and np.allclose(cam.t, 0))
-        if has_pose:
+        rows.append(_metric("focal_rel_error", name, f_err, tol.focal_rel))
+        rows.append(_metric("principal_point_error", name, pp, tol.principal_point_px, "px"))
+        if not (np.allclose(cam.R, np.eye(3)) and np.allclose(cam.t, 0)):
             dc = float(np.linalg.norm(cam.center - tr.center))
-            rows.append(
-                dict(
-                    metric="camera_center_error",
-                    item=name,
-                    value=dc,
-                    tolerance=tol.camera_center_mm,
-                    unit="mm",
-                )
-            )
-            rows.append(dict(metric="camera_rotation_error", item=name, value=rotation_angle_deg(cam.R, tr.R),
-                             tolerance=tol.camera_rotation_deg, unit="deg"))  # fmt: skip
-    for name in sorted(set(truth) - set(result)):
-        rows.append(
-            dict(metric="camera_missing", item=name, value=np.nan, tolerance=np.nan, unit="", passed=False)
-        )
-    for r in rows:
-        if "passed" not in r:
-            r["passed"] = bool(np.isnan(r["tolerance"]) or r["value"] <= r["tolerance"])
+            rows.append(_metric("camera_center_error", name, dc, tol.camera_center_mm, "mm"))
+            rot = rotation_angle_deg(cam.R, tr.R)
+            rows.append(_metric("camera_rotation_error", name, rot, tol.camera_rotation_deg, "deg"))
+    rows += [_metric("camera_missing", name, np.nan) for name in sorted(set(truth) - set(result))]
     return pd.DataFrame(rows, columns=["metric", "item", "value", "tolerance", "unit", "passed"])
 
 

@@ -6,16 +6,18 @@ Brown-Conrady distortion), and a specimen that deforms as :class:`Deformation` s
 
 Rendering is forward and exact at every polygon vertex: a vertex in air is projected with
 ``cv2.projectPoints``; a vertex in water with :func:`project_water` (Snell's law at both walls,
-solved to 1e-10 mm). Polygons are filled with exact area coverage (:mod:`triaxtrack.raster`),
+solved until the point is within 1e-6 mm of its refracted ray, about 3e-6 px). Polygons are
+filled with exact area coverage (:mod:`triaxtrack.raster`),
 so a dot's rendered centroid differs from the exact image of its centre only by the physical
 bias of perspective and refraction across the dot (measured by the tests). What is drawn,
 back to front: background, pedestals (sides and the visible end faces), their white labels and
 black ink, the membrane, its dots, then the white bands and black ink on the cell's outer wall.
 Faces turned away from the camera are culled (the specimen and pedestals are convex). Not
-drawn: the backs of the cell's far-side labels (seen through the water they are hidden
-behind the specimen for the default ring; document any set-up where they matter), shadows and
-reflections. Cameras must sit between the pedestal faces (``0 < camera_height_mm < height``),
-so the pedestals never hide the membrane.
+drawn: the backs of the cell's far-side white bands seen through the water (for the default
+ring they would show above the top pedestal, near the top of the image, where the render leaves
+plain background; no target is measured there), shadows and reflections. Every camera must sit
+between the pedestal faces for the whole test (checked), so the pedestals never hide the
+membrane.
 
 Frame ``k`` has time ``k / fps`` s and loading progress ``p = k / (frames - 1)``.
 """
@@ -39,7 +41,6 @@ from triaxtrack.kit import (
     ShapeSet,
     board_corners_mm,
     board_polygons_mm,
-    load_design,
     printed_shapes,
     surface_by_name,
     target_table,
@@ -193,9 +194,7 @@ def load_kit_design(kit_dir: str | Path) -> dict:
     except (OSError, json.JSONDecodeError) as err:
         raise ValueError(f"{kit_dir}: not a readable kit export: {err}") from err
     design = {k: v for k, v in kit.items() if k not in ("surfaces", "n_targets", "units")}
-    design["coded_target"] = {
-        k: v for k, v in kit["coded_target"].items() if k not in ("codes", "code_notes")
-    }
+    design["coded_target"] = {k: v for k, v in kit["coded_target"].items() if k != "code_notes"}
     design["board"] = {k: v for k, v in board.items() if k not in ("inner_corners", "units")}
     return design
 
@@ -249,8 +248,13 @@ def make_scene(cfg: SimulationConfig, kit_dir: str | Path, test_dir: str | Path,
     design = load_kit_design(test_dir / "kit")
     deformation = deformation_for(cfg, design)
     cams = make_cameras(cfg)
-    if not 0 < cfg.camera_height_mm < design["specimen"]["height"]:
-        raise ValueError("camera_height_mm must lie between the pedestal faces")
+    lowest_top = deformation.current_height(1.0)  # the top cap at the end of the test
+    for cam in cams:
+        if not 0 < cam.center[2] < lowest_top:
+            raise ValueError(
+                f"camera {cam.name} at z = {cam.center[2]:.1f} mm is not between the pedestal faces "
+                f"(0 and {lowest_top:.1f} mm at the end of loading): lower camera_height_mm"
+            )
     (test_dir / "test.yaml").write_text(yaml.safe_dump({
         "name": name,
         "fps": float(cfg.fps),
@@ -704,14 +708,6 @@ def simulate_test(
         render_calibration(test_dir, cam, test_dir / "calibration" / cam)
     finish_truth(test_dir, parts)
     shutil.rmtree(work)
-
-
-def make_kit_for(design_path: str | Path, out_dir: str | Path) -> Path:
-    """Export the kit of a design file (convenience for the CLI)."""
-    from triaxtrack.kit import export_kit
-
-    export_kit(load_design(design_path), out_dir)
-    return Path(out_dir)
 
 
 # ---------------------------------------------------------------- self-check

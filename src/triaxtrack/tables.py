@@ -3,7 +3,9 @@
 The result and truth tables of ``test-folder.md``. Units and conventions where the data is born:
 positions in millimetres in the cell frame; pixels in OpenCV convention (the centre of the
 top-left pixel is (0, 0)), distorted image coordinates; times in seconds from the first frame;
-strains dimensionless, compression positive.
+strains dimensionless, compression positive. In a synthetic test's ``truth/points.parquet``
+every target has a row at every frame, with ``n_rays`` the number of cameras that see it; rows
+with ``n_rays < 2`` are not expected to be reconstructed.
 """
 
 from __future__ import annotations

@@ -74,18 +74,24 @@ def _as_fps(fps: float | Fraction) -> Fraction:
     return frac
 
 
+ENCODER_THREADS = 1  # workflow jobs declare threads: 1; the encoder must not take every core
+
+
 def _encoder_options(codec: str, crf: int, preset: str, gop: int) -> dict[str, str]:
     """Encoder private options (x264/x265) for the given settings; see the module docstring."""
     if codec == "h264":
         # bframes=0: no reordering, pts == dts, no edit list, every packet is one frame.
         # open-gop=0 (x264 default, stated explicitly): segments start with a real IDR.
-        params = f"bframes=0:keyint={gop}:open-gop=0"
+        params = f"bframes=0:keyint={gop}:open-gop=0:threads={ENCODER_THREADS}"
         return {"crf": str(crf), "preset": preset, "x264-params": params}
     # x265 defaults to open GOP (CRA) and B-frames; turn both off, and keep it quiet.
     # info=0 drops x265's informational SEI from the headers: it lists every option incl.
     # the machine-dependent thread counts, which would make the extradata of segments encoded
     # on different machines differ (and concat_videos refuse them).
-    params = f"bframes=0:keyint={gop}:open-gop=0:info=0:log-level=error"
+    params = (
+        f"bframes=0:keyint={gop}:open-gop=0:info=0:log-level=error"
+        f":pools={ENCODER_THREADS}:frame-threads={ENCODER_THREADS}"
+    )
     return {"crf": str(crf), "preset": preset, "x265-params": params}
 
 

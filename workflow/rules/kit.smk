@@ -3,7 +3,7 @@ rule make_kit:
     input:
         design=config["kit_design"],
     output:
-        kit=directory("results/kit"),
+        kit=directory(KIT_DIR),
     log:
         "logs/kit/make_kit.log",
     benchmark:

@@ -6,7 +6,7 @@ rule simulate_scene:
     """Lay out the cameras and the deforming specimen; write test.yaml, kit/ (a copy of
     results/kit) and the static truth."""
     input:
-        kit="results/kit",
+        kit=KIT_DIR,
     output:
         test_yaml="results/{test}/simulated/test.yaml",
         cameras="results/{test}/simulated/truth/cameras.json",
