@@ -148,7 +148,6 @@ def test_pedestal_theta0_must_be_zero(design):
 
 
 def test_codes_read_back_from_the_export(kit_dir, design, table):
-    from triaxtrack.kit import ct_codes
-    from triaxtrack.simulate import load_kit_design
+    from triaxtrack.kit import ct_codes, load_kit_design
 
     assert ct_codes(load_kit_design(kit_dir), table) == ct_codes(design, table)

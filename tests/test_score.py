@@ -7,7 +7,8 @@ import json
 import pytest
 
 from triaxtrack.cli import main
-from triaxtrack.score import ScoreTolerances, load_cameras, score
+from triaxtrack.optics import read_cameras
+from triaxtrack.score import ScoreTolerances, score
 
 
 def test_truth_scores_perfectly_and_errors_fail(small_test, tmp_path):
@@ -26,4 +27,4 @@ def test_truth_scores_perfectly_and_errors_fail(small_test, tmp_path):
 def test_bad_input_names_the_file(tmp_path):
     (tmp_path / "cameras.json").write_text("{not json")
     with pytest.raises(ValueError, match="cameras.json"):
-        load_cameras(tmp_path / "cameras.json")
+        read_cameras(tmp_path / "cameras.json")

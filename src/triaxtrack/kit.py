@@ -206,6 +206,20 @@ def eq1_dot_id(ct_id: int, design: dict) -> int:
     raise ValueError(f"{ct_id} is not a cell CT")
 
 
+def load_kit_design(kit_dir: str | Path) -> dict:
+    """The design mapping back from a kit export (``kit.json`` + ``board.json``)."""
+    kit_dir = Path(kit_dir)
+    try:
+        kit = json.loads((kit_dir / "kit.json").read_text())
+        board = json.loads((kit_dir / "board.json").read_text())
+    except (OSError, json.JSONDecodeError) as err:
+        raise ValueError(f"{kit_dir}: not a readable kit export: {err}") from err
+    design = {k: v for k, v in kit.items() if k not in ("surfaces", "n_targets", "units")}
+    design["coded_target"] = {k: v for k, v in kit["coded_target"].items() if k != "code_notes"}
+    design["board"] = {k: v for k, v in board.items() if k not in ("inner_corners", "units")}
+    return design
+
+
 def ct_codes(design: dict, table: pd.DataFrame) -> dict[int, int]:
     """Code word of every coded target ID.
 

@@ -13,7 +13,9 @@ coordinates, converged to 1e-6 mm) and then applies OpenCV's distortion.
 
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -61,6 +63,16 @@ class Camera:
             R=np.array(d["R"], float),
             t=np.array(d["t"], float).reshape(3),
         )
+
+
+def read_cameras(path: str | Path) -> dict[str, Camera]:
+    """The cameras of a ``cameras.json`` (``test-folder.md``); ValueError naming the file."""
+    path = Path(path)
+    try:
+        cams = json.loads(path.read_text())["cameras"]
+        return {k: Camera.from_json(k, v) for k, v in cams.items()}
+    except (OSError, KeyError, TypeError, ValueError) as err:
+        raise ValueError(f"{path}: not a cameras.json: {err}") from err
 
 
 @dataclass(frozen=True)

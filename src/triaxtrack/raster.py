@@ -151,11 +151,6 @@ def paint_into(
     return r0, band
 
 
-def composite(image: np.ndarray, coverage: np.ndarray, value: float) -> np.ndarray:
-    """Paint ``value`` over ``image`` with per-pixel opacity ``coverage`` (returns a new array)."""
-    return image * (1.0 - coverage) + value * coverage
-
-
 def equal_area_radius(radius: float, n: int) -> float:
     """Circumradius of the regular n-gon whose area equals that of a circle of ``radius``."""
     return radius * np.sqrt(2 * np.pi / (n * np.sin(2 * np.pi / n)))

@@ -8,14 +8,13 @@ one row per metric and item: ``metric``, ``item`` (a camera name or 'all'), ``va
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass, fields
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
-from triaxtrack.optics import Camera
+from triaxtrack.optics import Camera, read_cameras
 
 
 @dataclass(frozen=True)
@@ -32,16 +31,6 @@ class ScoreTolerances:
         d = dict(d or {})
         known = {f.name for f in fields(ScoreTolerances)}
         return ScoreTolerances(**{k: float(v) for k, v in d.items() if k in known})
-
-
-def load_cameras(path: str | Path) -> dict[str, Camera]:
-    """Cameras of a ``cameras.json`` (ValueError naming the file when unreadable)."""
-    path = Path(path)
-    try:
-        cams = json.loads(path.read_text())["cameras"]
-        return {k: Camera.from_json(k, v) for k, v in cams.items()}
-    except (OSError, KeyError, TypeError, ValueError) as err:
-        raise ValueError(f"{path}: not a cameras.json: {err}") from err
 
 
 def rotation_angle_deg(Ra: np.ndarray, Rb: np.ndarray) -> float:
@@ -98,7 +87,7 @@ def score(results_dir: str | Path, truth_dir: str | Path, tol: ScoreTolerances |
     if (results_dir / "cameras.json").exists():
         parts.append(
             score_cameras(
-                load_cameras(results_dir / "cameras.json"), load_cameras(truth_dir / "cameras.json"), tol
+                read_cameras(results_dir / "cameras.json"), read_cameras(truth_dir / "cameras.json"), tol
             )
         )
     if not parts:

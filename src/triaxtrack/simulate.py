@@ -41,12 +41,13 @@ from triaxtrack.kit import (
     ShapeSet,
     board_corners_mm,
     board_polygons_mm,
+    load_kit_design,
     printed_shapes,
     surface_by_name,
     target_table,
 )
-from triaxtrack.optics import Camera, CellOptics, project_air, project_water
-from triaxtrack.raster import composite, packed_polygon_coverage, paint_into
+from triaxtrack.optics import Camera, CellOptics, project_air, project_water, read_cameras
+from triaxtrack.raster import paint_into
 from triaxtrack.tables import OBSERVATIONS, POINTS, VOLUME, read_table, write_table
 from triaxtrack.video import VideoWriter
 
@@ -185,20 +186,6 @@ def cell_optics(design: dict) -> CellOptics:
     )
 
 
-def load_kit_design(kit_dir: str | Path) -> dict:
-    """The design mapping back from a kit export (``kit.json`` + ``board.json``)."""
-    kit_dir = Path(kit_dir)
-    try:
-        kit = json.loads((kit_dir / "kit.json").read_text())
-        board = json.loads((kit_dir / "board.json").read_text())
-    except (OSError, json.JSONDecodeError) as err:
-        raise ValueError(f"{kit_dir}: not a readable kit export: {err}") from err
-    design = {k: v for k, v in kit.items() if k not in ("surfaces", "n_targets", "units")}
-    design["coded_target"] = {k: v for k, v in kit["coded_target"].items() if k != "code_notes"}
-    design["board"] = {k: v for k, v in board.items() if k not in ("inner_corners", "units")}
-    return design
-
-
 # ---------------------------------------------------------------- the scene
 @dataclass
 class Scene:
@@ -220,14 +207,13 @@ def load_scene(test_dir: str | Path) -> Scene:
     cfg = SimulationConfig.from_dict(scene["simulation"])
     design = load_kit_design(test_dir / "kit")
     table = target_table(design)
-    cams = json.loads((test_dir / "truth" / "cameras.json").read_text())["cameras"]
     return Scene(
         name=scene["name"],
         cfg=cfg,
         design=design,
         table=table,
         shapes=printed_shapes(design, table),
-        cameras={k: Camera.from_json(k, v) for k, v in cams.items()},
+        cameras=read_cameras(test_dir / "truth" / "cameras.json"),
         deformation=Deformation(**scene["deformation"]),
         cell=cell_optics(design),
     )
@@ -633,9 +619,9 @@ def render_board_image(
     def project(poly):
         return project_air(bcam, np.c_[poly, np.zeros(len(poly))])
 
-    img = composite(img, packed_polygon_coverage(project(sheet), [len(sheet)], h, w), GREY_LABEL)
+    paint_into(img, project(sheet), [len(sheet)], GREY_LABEL)
     sq = np.vstack(squares)
-    img = composite(img, packed_polygon_coverage(project(sq), [len(s) for s in squares], h, w), GREY_INK)
+    paint_into(img, project(sq), [len(s) for s in squares], GREY_INK)
     img = img + rng.normal(0, noise, img.shape)
     return np.clip(np.round(img), 0, 255).astype(np.uint8)
 
