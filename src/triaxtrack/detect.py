@@ -1,0 +1,343 @@
+"""Detection in one grey frame: dark blobs (solid dots) and ring-coded targets (CTs).
+
+The paper's section 2.3, first half: binarise, keep blobs by area and roundness, measure
+sub-pixel centroids, decode the CTs. Pixel coordinates follow OpenCV: the centre of the
+top-left pixel is (0, 0); ``u`` to the right, ``v`` down; distorted (as recorded) unless a column
+says ``undist`` (ideal pinhole pixels of the same camera matrix, see :func:`undistort_px`).
+
+* Binarisation is robust to uneven light: each pixel is compared with a local background (a
+  morphological closing, which removes every dark feature smaller than ``background_px``), and
+  a pixel is ink when it is darker than that background by ``ink_fraction`` of it.
+* Centroids are contrast-weighted (``background - grey``) over the blob grown by one pixel, so
+  partly covered edge pixels count.
+* ``contrast`` is the blob's darkest depth below the background; ``background`` the local white
+  level at its centre (the surface it is printed on: label, band, membrane).
+* Shape from second moments: ``major_px``/``minor_px`` are the full axes of the ellipse with the
+  blob's moments, ``roundness = minor / major`` (1 for a circle seen head-on; a dot seen at an
+  angle ``a`` off its normal has ``cos a``), ``fill = area / (pi major minor / 4)`` (about 1 for a
+  filled ellipse, lower for rings, arcs and merged blobs).
+* A CT is a round blob (its centre dot) around which the kit's design is read: a white gap, the
+  ring of ``sectors`` code sectors, a white surround. The centre dot's moment ellipse gives the
+  local affine map from the printed target to the image, so the ring is read where the design
+  puts it, at any roll and obliquity. Each sector's mean grey level must lie clearly on one side
+  of the mid-level (``ct_min_confidence``); the code must match a kit code exactly, or differ in
+  the one sector read least confidently. Anything else is rejected, never guessed.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+import pandas as pd
+
+from triaxtrack.codes import rotations
+
+# sampling of a CT, in units of the printed design (mm), relative to its centre
+CT_INNER_WHITE = 0.5  # fraction of the way from the centre dot's edge to the ring: the white gap
+CT_RING_RADII = (0.35, 0.5, 0.65)  # fractions across the code ring where sectors are read
+CT_OUTER_WHITE = 0.35  # fraction of the way from the ring's outer edge to the label edge
+CT_SAMPLES_PER_SECTOR = 8
+CT_CENTRE_FRACTION = 0.45  # centre-dot samples within this fraction of its radius
+
+
+@dataclass(frozen=True)
+class DetectParams:
+    """Thresholds of :func:`detect_blobs` and :func:`decode_coded_targets` (pixels unless stated).
+
+    ``background_px`` 0 means ``image width / 80`` (16 px at 1280, 48 px at 3840): the local
+    background is measured over this size, so it must exceed the largest dark feature (a CT's
+    centre dot) but stay below the size of the white labels and bands.
+    """
+
+    background_px: int = 0
+    ink_fraction: float = 0.35
+    min_contrast: float = 25.0  # grey levels: fainter blobs are noise
+    min_area_px: int = 4
+    max_area_px: int = 40000
+    min_roundness: float = 0.2
+    min_fill: float = 0.7
+    max_fill: float = 1.3
+    ct_min_area_px: int = 12
+    ct_min_confidence: float = 0.3  # each sector at least 15 % of the contrast from the mid-level
+    ct_min_white: float = 0.6  # normalised level the white gap and surround must reach
+    ct_outer_white_fraction: float = 0.7  # share of the surround that must be white
+
+
+BLOB_COLUMNS = [
+    "u_px", "v_px", "area_px", "major_px", "minor_px", "angle_rad", "roundness", "fill",
+    "contrast", "background", "cov_uu", "cov_uv", "cov_vv",
+]  # fmt: skip
+
+
+def background(gray: np.ndarray, size_px: int) -> np.ndarray:
+    """Local white level: the closing of ``gray`` by a disc of ``size_px`` (float32, same shape).
+
+    Computed on a max-pooled copy (a closing is a dilation then an erosion, and max-pooling is a
+    dilation), then interpolated back, so it costs little at 4K. Never darker than the pixel.
+    """
+    g = np.asarray(gray)
+    h, w = g.shape
+    f = max(1, int(size_px) // 6)
+    hp, wp = -(-h // f) * f, -(-w // f) * f
+    pad = np.pad(g, ((0, hp - h), (0, wp - w)), mode="edge")
+    small = pad.reshape(hp // f, f, wp // f, f).max(axis=(1, 3))
+    k = max(3, int(round(size_px / f)) | 1)
+    kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (k, k))
+    small = cv2.erode(cv2.dilate(small, kernel), kernel)
+    bg = cv2.resize(small.astype(np.float32), (wp, hp), interpolation=cv2.INTER_LINEAR)[:h, :w]
+    # the pooled grid is offset by half a cell: shift back
+    if f > 1:
+        m = np.float32([[1, 0, (f - 1) / 2], [0, 1, (f - 1) / 2]])
+        bg = cv2.warpAffine(bg, m, (w, h), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    return np.maximum(bg, g.astype(np.float32))
+
+
+def _label_sums(labels: np.ndarray, n: int, weights: np.ndarray | None = None) -> dict[str, np.ndarray]:
+    """Per-label zeroth, first and second moments over the pixels of each label (label 0 skipped)."""
+    ys, xs = np.nonzero(labels)
+    lab = labels[ys, xs]
+    w = np.ones(len(lab)) if weights is None else weights[ys, xs].astype(np.float64)
+    xs = xs.astype(np.float64)
+    ys = ys.astype(np.float64)
+
+    def s(v):
+        return np.bincount(lab, weights=v, minlength=n)
+
+    return {
+        "m0": s(w), "x": s(w * xs), "y": s(w * ys),
+        "xx": s(w * xs * xs), "yy": s(w * ys * ys), "xy": s(w * xs * ys),
+    }  # fmt: skip
+
+
+def detect_blobs(gray: np.ndarray, params: DetectParams | None = None) -> pd.DataFrame:
+    """Every dark blob of a grey frame, with sub-pixel centroid and shape (columns BLOB_COLUMNS).
+
+    No filtering by shape here beyond ``min_area_px``/``max_area_px``; see :func:`dot_mask`.
+    """
+    p = params or DetectParams()
+    g = np.asarray(gray)
+    if g.ndim != 2:
+        raise ValueError(f"detect_blobs: expected a 2-D grey image, got shape {g.shape}")
+    size = p.background_px or max(8, g.shape[1] // 80)
+    bg = background(g, size)
+    contrast = bg - g.astype(np.float32)
+    ink = (contrast > np.maximum(p.min_contrast, p.ink_fraction * bg)).astype(np.uint8)
+    n, labels, stats, _ = cv2.connectedComponentsWithStats(ink, connectivity=8)
+    area = stats[:, cv2.CC_STAT_AREA].astype(np.float64)
+    keep = (area >= p.min_area_px) & (area <= p.max_area_px)
+    keep[0] = False
+    lut = np.where(keep, np.arange(n), 0).astype(np.int32)
+    labels = lut[labels]
+    geo = _label_sums(labels, n)
+    # contrast-weighted centroid over the blob grown by one pixel (edge pixels partly covered)
+    grown = cv2.dilate(labels.astype(np.float32), np.ones((3, 3), np.uint8)).astype(np.int32)
+    grown = np.where(labels > 0, labels, grown)
+    wts = np.clip(contrast, 0, None)
+    cen = _label_sums(grown, n, wts)
+    idx = np.nonzero(keep)[0]
+    m0 = geo["m0"][idx]
+    mx, my = geo["x"][idx] / m0, geo["y"][idx] / m0
+    # moments of the union of unit pixels: point moments plus 1/12 per axis
+    cuu = geo["xx"][idx] / m0 - mx**2 + 1 / 12
+    cvv = geo["yy"][idx] / m0 - my**2 + 1 / 12
+    cuv = geo["xy"][idx] / m0 - mx * my
+    tr, det = cuu + cvv, cuu * cvv - cuv**2
+    disc = np.sqrt(np.maximum(tr**2 / 4 - det, 0))
+    l1, l2 = tr / 2 + disc, np.maximum(tr / 2 - disc, 1e-12)
+    major, minor = 4 * np.sqrt(l1), 4 * np.sqrt(l2)
+    w0 = cen["m0"][idx]
+    peak = np.zeros(n)
+    np.maximum.at(peak, labels[labels > 0], contrast[labels > 0])
+    return pd.DataFrame({
+        "u_px": cen["x"][idx] / w0,
+        "v_px": cen["y"][idx] / w0,
+        "area_px": area[idx],
+        "major_px": major,
+        "minor_px": minor,
+        "angle_rad": 0.5 * np.arctan2(2 * cuv, cuu - cvv),
+        "roundness": minor / major,
+        "fill": area[idx] / (np.pi * major * minor / 4),
+        "contrast": peak[idx],
+        "background": bg[
+            np.clip(np.rint(my).astype(int), 0, g.shape[0] - 1), np.clip(np.rint(mx).astype(int), 0, g.shape[1] - 1)
+        ],
+        "cov_uu": cuu,
+        "cov_uv": cuv,
+        "cov_vv": cvv,
+    })  # fmt: skip
+
+
+def dot_mask(blobs: pd.DataFrame, params: DetectParams | None = None) -> np.ndarray:
+    """Which blobs pass the paper's area and roundness criteria for solid dots."""
+    p = params or DetectParams()
+    return (
+        (blobs.area_px >= p.min_area_px)
+        & (blobs.roundness >= p.min_roundness)
+        & (blobs.fill >= p.min_fill)
+        & (blobs.fill <= p.max_fill)
+    ).to_numpy()
+
+
+def ellipse_maps(blobs: pd.DataFrame) -> np.ndarray:
+    """(N, 2, 2) symmetric maps taking the unit circle to each blob's moment ellipse (pixels)."""
+    cov = np.stack(
+        [blobs.cov_uu.to_numpy(), blobs.cov_uv.to_numpy(), blobs.cov_uv.to_numpy(), blobs.cov_vv.to_numpy()],
+        axis=1,
+    ).reshape(-1, 2, 2)
+    vals, vecs = np.linalg.eigh(cov)
+    root = 2 * np.sqrt(np.maximum(vals, 1e-12))
+    return np.einsum("nij,nj,nkj->nik", vecs, root, vecs)
+
+
+@dataclass(frozen=True)
+class CodeBook:
+    """All rotations of the kit's CT codes, for vectorised nearest-code search."""
+
+    ids: np.ndarray  # (K,) CT id of each rotated word
+    words: np.ndarray  # (K,) rotated code words
+    sectors: int
+
+    @staticmethod
+    def from_codes(codes: dict[int, int], sectors: int) -> CodeBook:
+        ids, words = [], []
+        for tid, word in sorted(codes.items()):
+            for r in rotations(word, sectors):
+                ids.append(tid)
+                words.append(r)
+        return CodeBook(np.array(ids, np.int64), np.array(words, np.int64), sectors)
+
+    def nearest(self, word: int) -> tuple[int, int, int, int]:
+        """(id, distance, rotated word matched, distance to the nearest *other* id)."""
+        x = np.bitwise_xor(self.words, np.int64(word))
+        d = np.array([bin(int(v)).count("1") for v in x]) if len(x) < 64 else _popcount(x)
+        i = int(np.argmin(d))
+        best_id = int(self.ids[i])
+        other = d[self.ids != best_id]
+        return best_id, int(d[i]), int(self.words[i]), int(other.min()) if len(other) else 99
+
+
+def _popcount(x: np.ndarray) -> np.ndarray:
+    x = x.astype(np.uint64)
+    c = np.zeros(len(x), np.int64)
+    while np.any(x):
+        c += (x & np.uint64(1)).astype(np.int64)
+        x >>= np.uint64(1)
+    return c
+
+
+def _ct_geometry(ct: dict) -> dict[str, float]:
+    """Sampling radii of a CT in units of its centre-dot radius."""
+    rc, r0, r1 = ct["centre_radius"], ct["ring_inner_radius"], ct["ring_outer_radius"]
+    label = ct.get("label_radius", r1 + 1.2)
+    return {
+        "inner": (rc + CT_INNER_WHITE * (r0 - rc)) / rc,
+        "ring": tuple((r0 + f * (r1 - r0)) / rc for f in CT_RING_RADII),
+        "outer": (r1 + CT_OUTER_WHITE * (label - r1)) / rc,
+        "extent": label / rc,
+    }
+
+
+def decode_coded_targets(
+    gray: np.ndarray, blobs: pd.DataFrame, codes: dict[int, int], ct: dict, params: DetectParams | None = None
+) -> pd.DataFrame:
+    """Read the ring code around every candidate centre dot; keep the confident, unique ones.
+
+    ``codes``: CT id -> code word (bit k = sector k, :func:`triaxtrack.kit.ct_codes`); ``ct``: the
+    kit's ``coded_target`` design. Returns one row per accepted CT: ``id``, ``blob`` (row index in
+    ``blobs``), ``u_px``, ``v_px`` (the centre dot's centroid), ``confidence`` (0-1: the weakest
+    sector's distance from the mid-level, relative to half the contrast), ``distance`` (sectors
+    corrected, 0 or 1), ``white``, ``black`` (grey levels), ``extent_px`` (the label's radius
+    along the major axis). IDs read more than once in the frame are all dropped.
+    """
+    p = params or DetectParams()
+    n = int(ct["sectors"])
+    geo = _ct_geometry(ct)
+    cand = np.nonzero(
+        (blobs.area_px.to_numpy() >= p.ct_min_area_px)
+        & (blobs.roundness.to_numpy() >= p.min_roundness)
+        & (blobs.fill.to_numpy() >= p.min_fill)
+        & (blobs.fill.to_numpy() <= p.max_fill)
+    )[0]
+    cols = ["id", "blob", "u_px", "v_px", "confidence", "distance", "white", "black", "extent_px"]
+    if len(cand) == 0:
+        return pd.DataFrame(columns=cols)
+    sub = blobs.iloc[cand]
+    maps = ellipse_maps(sub)  # unit circle -> centre dot ellipse
+    centre = sub[["u_px", "v_px"]].to_numpy()
+    ns = n * CT_SAMPLES_PER_SECTOR
+    phi = 2 * np.pi * (np.arange(ns) + 0.5) / ns
+    # counter-clockwise as seen from outside the surface = counter-clockwise on screen (v down)
+    circle = np.stack([np.cos(phi), -np.sin(phi)], axis=1)
+    radii = [0.0, CT_CENTRE_FRACTION * 0.5, CT_CENTRE_FRACTION, geo["inner"], *geo["ring"], geo["outer"]]
+    pts = centre[:, None, None, :] + np.einsum(
+        "nij,rsj->nrsi", maps, np.asarray(radii)[:, None, None] * circle[None, :, :]
+    )
+    g = np.asarray(gray, np.float32)
+    mx = pts[..., 0].reshape(len(cand), -1).astype(np.float32)
+    my = pts[..., 1].reshape(len(cand), -1).astype(np.float32)
+    vals = cv2.remap(g, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=-1.0)
+    vals = vals.reshape(len(cand), len(radii), ns)
+    inside = (vals >= 0).all(axis=(1, 2))
+    black = np.median(vals[:, :3].reshape(len(cand), -1), axis=1)
+    white = np.median(vals[:, 3], axis=1)
+    span = np.maximum(white - black, 1e-6)
+    norm = (vals - black[:, None, None]) / span[:, None, None]
+    ok = inside & (white - black >= p.min_contrast)
+    ok &= norm[:, 3].min(axis=1) >= p.ct_min_white
+    ok &= (norm[:, -1] >= p.ct_min_white).mean(axis=1) >= p.ct_outer_white_fraction
+    rings = norm[:, 4:-1]  # (N, radii, ns)
+    # sector means over the central half of each sector, for each sub-sector phase
+    k = CT_SAMPLES_PER_SECTOR
+    nr = rings.shape[1]
+    best_conf = np.full(len(cand), -1.0)
+    best_bits = np.zeros((len(cand), n), np.uint8)
+    sector_conf = np.zeros((len(cand), n))
+    for s in range(k):
+        rolled = np.roll(rings, -s, axis=2).reshape(len(cand), nr, n, k)
+        per_radius = rolled[..., k // 4 : k - k // 4].mean(axis=3)  # (N, radii, n)
+        means = per_radius.mean(axis=1)
+        bits = means < 0.5
+        # a printed sector is dark or light across the whole ring width
+        consistent = ((per_radius < 0.5) == bits[:, None, :]).all(axis=(1, 2))
+        conf = np.where(consistent, (2 * np.abs(means - 0.5)).min(axis=1), -1.0)
+        better = conf > best_conf
+        best_conf[better] = conf[better]
+        best_bits[better] = bits[better].astype(np.uint8)
+        sector_conf[better] = 2 * np.abs(means[better] - 0.5)
+    ok &= best_conf >= p.ct_min_confidence
+    book = CodeBook.from_codes(codes, n)
+    rows = []
+    for i in np.nonzero(ok)[0]:
+        word = int(sum(int(b) << j for j, b in enumerate(best_bits[i])))
+        tid, dist, matched, other = book.nearest(word)
+        if dist > 1 or other <= dist + 1:
+            continue
+        if dist == 1:
+            flipped = int(np.log2(word ^ matched))
+            if flipped != int(np.argmin(sector_conf[i])):
+                continue
+        rows.append(dict(
+            id=tid, blob=int(sub.index[i]), u_px=centre[i, 0], v_px=centre[i, 1],
+            confidence=float(best_conf[i]), distance=dist, white=float(white[i]),
+            black=float(black[i]), extent_px=float(np.linalg.norm(maps[i], 2) * geo["extent"]),
+        ))  # fmt: skip
+    out = pd.DataFrame(rows, columns=cols)
+    dup = out.id.duplicated(keep=False)
+    out = out[~dup].sort_values("confidence", ascending=False)
+    # a CT's label holds nothing else: drop candidates inside a more confident CT (code pieces)
+    centres = out[["u_px", "v_px"]].to_numpy()
+    pos = {b: i for i, b in enumerate(sub.index)}
+    keep = []
+    for a in range(len(out)):
+        ma = maps[pos[out.blob.iloc[a]]]
+        inside = [
+            np.linalg.norm(np.linalg.solve(ma, centres[b] - centres[a])) < geo["extent"]
+            or np.linalg.norm(np.linalg.solve(maps[pos[out.blob.iloc[b]]], centres[a] - centres[b]))
+            < geo["extent"]
+            for b in keep
+        ]
+        if not any(inside):
+            keep.append(a)
+    return out.iloc[keep].sort_values("id").reset_index(drop=True)

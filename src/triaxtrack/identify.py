@@ -1,0 +1,863 @@
+"""Identification: give every detected dot its design ID, or leave it unlabelled with a reason.
+
+The paper's section 2.3, second half, against the kit design (``triaxtrack.kit``). All geometry
+is done in undistorted pixels (ideal pinhole pixels of the calibrated camera matrix), where a
+straight line in space stays straight.
+
+* **Cell annular stripes.** The larger dot under cell CT ``c`` has ID ``4 c - 243`` (Eq. 1). Its
+  position is predicted from the CT by the designed offset (``dot_offset`` mm down the cell),
+  through the CT's local affine map (from its centre dot's ellipse and the direction to its
+  neighbouring CTs), then refined to the nearest detected dot. It must be larger than the dots
+  beside it. The smaller dots between two larger dots are found by 1-D linear interpolation;
+  beyond the last larger dot in view, the stripe is followed dot by dot (extrapolating from
+  the last three).
+* **Longitudinal stripes.** The uppermost and lowermost dots are predicted from the CTs directly
+  above and below them (the CT and its Eq. 1 dot fix the local vertical in the image), and the
+  dots between are followed and interpolated along the stripe.
+* **Membrane.** From each pedestal CT pair (top CT C, bottom CT C + 16) a seed dot near the
+  pair's line starts a 2-D walk of the grid: each next dot is predicted from its labelled grid
+  neighbours (straight continuation and parallelograms) and accepted only when exactly one
+  detected dot lies within the gate. The larger dots (every fourth row and column, Eqs. 2-3)
+  give the grid's phase by their area; the pair's line gives the column of C's larger dots,
+  c = (C - 1) * 4 + 1, and the pair's CTs, ``z_from_face`` above and below the membrane's end rows,
+  give the row. ID = (r - 1) * 64 + c + 1000 (Eq. 4).
+
+Every step accepts a dot only when it is the single candidate within its gate (a fraction of
+the local dot spacing) and not claimed twice; the larger dots must be larger. A region, stripe
+or grid that fails a check is left unlabelled (``reason``), never guessed.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+from scipy.spatial import cKDTree
+
+from triaxtrack.detect import ellipse_maps
+
+UNLABELLED = -1
+# membrane dots whose image comes this close (mm on the cell wall) to a longitudinal band may be
+# partly hidden by it, which biases their centroid: they are not labelled
+BAND_MARGIN_MM = 1.5
+
+
+@dataclass(frozen=True)
+class IdentifyParams:
+    """Gates, as fractions of the local dot spacing, and the checks' limits."""
+
+    gate: float = 0.3  # a predicted dot must be within this fraction of the local spacing
+    anchor_gate: float = 0.35  # the Eq. 1 and stripe-end predictions (over 9-16 mm from a CT)
+    large_area_ratio: float = 1.15  # a larger dot's area over its neighbours', at least
+    phase_margin: float = 0.12  # log-area margin of the large-dot phase over the next best
+    min_region_dots: int = 12  # a membrane grid region smaller than this is left unlabelled
+    row_tolerance: float = 1.2  # |row estimated from a pedestal CT - row assigned|, rows
+    min_label_area_px: float = 6.0  # smaller dots are detected but not labelled
+    min_label_roundness: float = 0.4  # dots seen more than about 70 degrees off their normal
+
+
+def undistorted_jacobians(undistort, uv: np.ndarray, h: float = 0.5) -> np.ndarray:
+    """(N, 2, 2) d(undistorted)/d(distorted) at pixel positions, by central differences."""
+    uv = np.asarray(uv, np.float64).reshape(-1, 2)
+    cols = []
+    for e in (np.array([h, 0.0]), np.array([0.0, h])):
+        cols.append((undistort(uv + e) - undistort(uv - e)) / (2 * h))
+    return np.stack(cols, axis=2)
+
+
+def ellipse_radius(maps: np.ndarray, dirs: np.ndarray) -> np.ndarray:
+    """Radius of each ellipse (maps: unit circle -> ellipse) along unit directions ``dirs``."""
+    inv = np.linalg.inv(maps)
+    return 1.0 / np.linalg.norm(np.einsum("nij,nj->ni", inv, dirs), axis=1)
+
+
+def local_affine(map_u: np.ndarray, theta_dir: np.ndarray, radius_mm: float) -> np.ndarray:
+    """(2, 2) map from design millimetres (theta-arc to the right, z up, seen from outside) to
+    undistorted pixel offsets, at a CT whose centre dot (radius ``radius_mm``) images as the
+    ellipse ``map_u`` and whose +theta direction in the image is ``theta_dir``.
+
+    Seen from outside, (theta, z) -> (u, v) reverses orientation (z up, v down), so the map is
+    ``map_u / r . Rot(a) . diag(1, -1)`` with ``a`` such that +theta points along ``theta_dir``.
+    """
+    x = np.linalg.solve(map_u, theta_dir)
+    a = np.arctan2(x[1], x[0])
+    rot = np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]])
+    return map_u / radius_mm @ rot @ np.diag([1.0, -1.0])
+
+
+class _Pool:
+    """The free candidate dots, with a KD-tree for gated nearest-point search."""
+
+    def __init__(self, pos: np.ndarray, free: np.ndarray, blobs: pd.DataFrame):
+        self.pos = pos
+        self.free = free.copy()
+        self.area = blobs.area_px.to_numpy()
+        self.white = blobs.background.to_numpy()
+        self.roundness = blobs.roundness.to_numpy()
+        self.tree = cKDTree(pos)
+
+    def unique_within(self, pred: np.ndarray, radius: float) -> int:
+        """Index of the single free dot within ``radius`` of ``pred``; -1 if none or several.
+
+        Taken dots count as candidates too (a prediction that lands on a labelled dot is
+        ambiguous, not a licence to take the next nearest).
+        """
+        if not np.all(np.isfinite(pred)) or radius <= 0:
+            return -1
+        hits = self.tree.query_ball_point(pred, radius)
+        if len(hits) != 1 or not self.free[hits[0]]:
+            return -1
+        return int(hits[0])
+
+
+def grow_chain(
+    pool: _Pool,
+    labels: dict[int, int],
+    n: int,
+    cyclic: bool,
+    gate: float,
+    step_hint: dict[int, np.ndarray] | None = None,
+    max_bracket: int = 4,
+) -> dict[int, int]:
+    """Extend a 1-D stripe labelling (index -> dot) by interpolation and stepwise extrapolation.
+
+    A missing dot stops the walk (the next prediction falls between dots, outside the gate), so a
+    gap is never skipped and the IDs beyond it cannot shift. ``step_hint[i]``: the image step from
+    index i to i + 1, used when i has no labelled neighbour to extrapolate from.
+    """
+    labels = dict(labels)
+    hint = step_hint or {}
+    pos = pool.pos
+
+    def key(i):
+        return i % n if cyclic else i
+
+    def has(i):
+        return (cyclic or 0 <= i < n) and key(i) in labels
+
+    def p(i):
+        return pos[labels[key(i)]]
+
+    while True:
+        proposals: dict[int, tuple[int, float]] = {}
+        for i in range(n):
+            if i in labels:
+                continue
+            pred = spacing = None
+            lo = next((j for j in range(i - 1, i - max_bracket, -1) if has(j)), None)
+            hi = next((k for k in range(i + 1, i + max_bracket) if has(k)), None)
+            if lo is not None and hi is not None:
+                f = (i - lo) / (hi - lo)
+                pred = p(lo) + f * (p(hi) - p(lo))
+                spacing = np.linalg.norm(p(hi) - p(lo)) / (hi - lo)
+            else:
+                for s in (1, -1):
+                    a = i - s
+                    if not has(a):
+                        continue
+                    if has(a - s):
+                        d = p(a) - p(a - s)
+                        if has(a - 2 * s):
+                            pred = p(a) + d + (d - (p(a - s) - p(a - 2 * s)))
+                        else:
+                            pred = p(a) + d
+                        spacing = np.linalg.norm(d)
+                    elif (s == 1 and key(a) in hint) or (s == -1 and key(i) in hint):
+                        d = hint[key(a)] if s == 1 else -hint[key(i)]
+                        pred, spacing = p(a) + d, np.linalg.norm(d)
+                    if pred is not None:
+                        break
+            if pred is None:
+                continue
+            j = pool.unique_within(pred, gate * spacing)
+            if j >= 0:
+                if any(v[0] == j for v in proposals.values()):
+                    proposals = {k: v for k, v in proposals.items() if v[0] != j}
+                    continue
+                proposals[i] = (j, float(np.linalg.norm(pos[j] - pred) / (gate * spacing)))
+        if not proposals:
+            return labels
+        for i, (j, _) in proposals.items():
+            labels[i] = j
+            pool.free[j] = False
+
+
+NEIGHBOURS = ((1, 0), (-1, 0), (0, 1), (0, -1))
+MIN_SUPPORT = 3  # labelled nodes among the 8 around a node before it is predicted
+AREA_RANGE = (0.4, 2.5)  # a grid dot's area over its labelled neighbours' median
+WHITE_TOLERANCE = 0.08  # a grid dot's local white level may differ this much from its neighbours'
+
+
+def grow_grid(pool: _Pool, seed: dict[tuple[int, int], int], gate: float) -> dict[tuple[int, int], int]:
+    """Extend a 2-D grid labelling ((row, col) -> dot) from its labelled neighbours.
+
+    A node is predicted by every straight continuation (two labelled nodes in a line) and every
+    parallelogram (three labelled corners); the predictions must agree within the gate, and
+    exactly one free dot may lie within ``gate`` times the local spacing of their median.
+    """
+    labels = dict(seed)
+    pos = pool.pos
+    frontier = {(i + di, j + dj) for (i, j) in labels for di, dj in NEIGHBOURS} - set(labels)
+    while frontier:
+        proposals: dict[tuple[int, int], int] = {}
+        claimed: dict[int, tuple[int, int]] = {}
+        for i, j in frontier:
+            support = sum((i + di, j + dj) in labels for di in (-1, 0, 1) for dj in (-1, 0, 1))
+            if support < MIN_SUPPORT:
+                continue  # never grow a spur: a node needs labelled neighbours on two sides
+            preds, steps = [], []
+            for di, dj in NEIGHBOURS:
+                a, b = (i + di, j + dj), (i + 2 * di, j + 2 * dj)
+                if a in labels:
+                    if b in labels:
+                        d = pos[labels[a]] - pos[labels[b]]
+                        preds.append(pos[labels[a]] + d)
+                        steps.append(np.linalg.norm(d))
+                    c = (i - di, j - dj)
+                    if c in labels and di >= 0 and dj >= 0:
+                        preds.append(0.5 * (pos[labels[a]] + pos[labels[c]]))
+                        steps.append(0.5 * np.linalg.norm(pos[labels[a]] - pos[labels[c]]))
+            for di in (1, -1):
+                for dj in (1, -1):
+                    a, b, c = (i + di, j), (i, j + dj), (i + di, j + dj)
+                    if a in labels and b in labels and c in labels:
+                        preds.append(pos[labels[a]] + pos[labels[b]] - pos[labels[c]])
+                        steps.append(
+                            min(
+                                np.linalg.norm(pos[labels[a]] - pos[labels[c]]),
+                                np.linalg.norm(pos[labels[b]] - pos[labels[c]]),
+                            )
+                        )
+            if not preds:
+                continue
+            preds = np.asarray(preds)
+            pred = np.median(preds, axis=0)
+            radius = gate * min(steps)
+            if np.max(np.linalg.norm(preds - pred, axis=1)) > radius:
+                continue
+            k = pool.unique_within(pred, radius)
+            if k < 0:
+                continue
+            nb = [labels[(i + di, j + dj)] for di, dj in NEIGHBOURS if (i + di, j + dj) in labels]
+            if not AREA_RANGE[0] <= pool.area[k] / np.median(pool.area[nb]) <= AREA_RANGE[1]:
+                continue  # not a dot of this grid (a fragment of an edge, a merged pair, ...)
+            if abs(pool.white[k] / np.median(pool.white[nb]) - 1) > WHITE_TOLERANCE:
+                continue  # printed on another surface (a longitudinal band in front, ...)
+            if k in claimed:
+                proposals.pop(claimed[k], None)
+                continue
+            claimed[k] = (i, j)
+            proposals[(i, j)] = k
+        if not proposals:
+            break
+        for node, k in proposals.items():
+            labels[node] = k
+            pool.free[k] = False
+        # a node becomes predictable when a node up to two steps away is labelled
+        frontier = {
+            (i + di, j + dj) for (i, j) in proposals for di in range(-2, 3) for dj in range(-2, 3)
+        } - set(labels)
+    return labels
+
+
+LABEL_COLUMNS = [
+    "id", "kind", "group", "u_px", "v_px", "u_undist_px", "v_undist_px", "area_px", "roundness",
+    "quality", "reason",
+]  # fmt: skip
+
+
+@dataclass
+class _Frame:
+    """Working state of one frame's identification."""
+
+    blobs: pd.DataFrame
+    pos: np.ndarray  # undistorted centroids of all blobs
+    ids: np.ndarray  # per blob, UNLABELLED until labelled
+    group: np.ndarray  # per blob, stripe or region name
+    quality: np.ndarray
+    reason: np.ndarray
+
+
+def _ct_maps(f: _Frame, cts: pd.DataFrame, undistort) -> dict[int, tuple[np.ndarray, np.ndarray]]:
+    """CT id -> (undistorted centre, centre-dot ellipse map in undistorted pixels)."""
+    if cts.empty:
+        return {}
+    rows = cts.blob.to_numpy()
+    maps = ellipse_maps(f.blobs.loc[rows])
+    jac = undistorted_jacobians(undistort, f.blobs.loc[rows, ["u_px", "v_px"]].to_numpy())
+    maps_u = np.einsum("nij,njk->nik", jac, maps)
+    return {int(t): (f.pos[b], m) for t, b, m in zip(cts.id, rows, maps_u, strict=True)}
+
+
+def _inside_cts(f: _Frame, cts: pd.DataFrame, ct_design: dict) -> np.ndarray:
+    """Blobs that belong to a CT (its centre dot, code sectors, or anything on its label)."""
+    inside = np.zeros(len(f.blobs), bool)
+    if cts.empty:
+        return inside
+    extent = ct_design.get("label_radius", ct_design["ring_outer_radius"] + 1.2) / ct_design["centre_radius"]
+    maps = ellipse_maps(f.blobs.loc[cts.blob.to_numpy()])
+    uv = f.blobs[["u_px", "v_px"]].to_numpy()
+    tree = cKDTree(uv)
+    for (cu, cv), m in zip(cts[["u_px", "v_px"]].to_numpy(), maps, strict=True):
+        near = tree.query_ball_point((cu, cv), extent * np.linalg.norm(m, 2))
+        if near:
+            local = np.linalg.solve(m, (uv[near] - (cu, cv)).T).T
+            inside[np.asarray(near)[np.linalg.norm(local, axis=1) < extent]] = True
+    return inside
+
+
+def _theta_dir(ct_id: int, first: int, count: int, centres: dict) -> np.ndarray | None:
+    """Image direction of +theta at a CT, from its decoded neighbours in the same stripe."""
+    nxt = first + (ct_id - first + 1) % count
+    prv = first + (ct_id - first - 1) % count
+    if nxt in centres and prv in centres:
+        d = centres[nxt][0] - centres[prv][0]
+    elif nxt in centres:
+        d = centres[nxt][0] - centres[ct_id][0]
+    elif prv in centres:
+        d = centres[ct_id][0] - centres[prv][0]
+    else:
+        return None
+    return d / np.linalg.norm(d)
+
+
+def _assign(f: _Frame, blob: int, tid: int, group: str, quality: float) -> None:
+    f.ids[blob] = tid
+    f.group[blob] = group
+    f.quality[blob] = quality
+    f.reason[blob] = ""
+
+
+def _label_cell_stripes(f: _Frame, pool: _Pool, centres: dict, design: dict, p: IdentifyParams) -> None:
+    cell = design["cell_targets"]
+    per, offset = cell["dots_per_ct"], cell["dot_offset"]
+    rc = design["coded_target"]["centre_radius"]
+    r_out = design["cell"]["outer_radius"]
+    ct_stripes = {s["name"]: s for s in cell["ct_stripes"]}
+    area = f.blobs.area_px.to_numpy()
+    for ds in cell["dot_stripes"]:
+        cs = ct_stripes[ds["ct_stripe"]]
+        n = ds["count"]
+        spacing_mm = 2 * np.pi * r_out / n
+        anchors, hints = {}, {}
+        for c in range(cs["first_id"], cs["first_id"] + cs["count"]):
+            if c not in centres:
+                continue
+            d = _theta_dir(c, cs["first_id"], cs["count"], centres)
+            if d is None:
+                continue
+            centre, m = centres[c]
+            a = local_affine(m, d, rc)
+            pred = centre + a @ np.array([0.0, -offset])
+            step = a @ np.array([spacing_mm, 0.0])
+            k = pool.unique_within(pred, p.anchor_gate * np.linalg.norm(step))
+            if k < 0:
+                continue
+            # Eq. 1's dot is the larger one: larger than every other dot around it
+            near = [j for j in pool.tree.query_ball_point(pool.pos[k], 1.3 * np.linalg.norm(step)) if j != k]
+            if near and area[k] < p.large_area_ratio * area[near].max():
+                continue
+            i = per * (c - cs["first_id"])
+            anchors[i] = k
+            hints[i] = step
+            pool.free[k] = False
+        labels = grow_chain(pool, anchors, n, cyclic=True, gate=p.gate, step_hint=hints)
+        for i, k in labels.items():
+            _assign(f, k, ds["first_id"] + i, ds["name"], 1.0 if i in anchors else 0.9)
+
+
+def _label_longitudinal(f: _Frame, pool: _Pool, centres: dict, design: dict, p: IdentifyParams) -> None:
+    cell = design["cell_targets"]
+    offset = cell["dot_offset"]
+    zt, zb = cell["longitudinal_z_top"], cell["longitudinal_z_bottom"]
+    labelled = {int(t): k for k, t in enumerate(f.ids) if t != UNLABELLED}
+    from triaxtrack.kit import eq1_dot_id
+
+    top, bottom = cell["ct_stripes"][0], cell["ct_stripes"][-1]
+    for ls in cell["longitudinal_stripes"]:
+        n = ls["count"]
+        spacing_mm = (zt - zb) / (n - 1)
+        anchors, hints = {}, {}
+        ct_top = ls["ct"]
+        ct_bottom = ct_top - top["first_id"] + bottom["first_id"]
+        for ct_id, ct_z, index, z in (
+            (ct_top, top["z"], 0, zt),
+            (ct_bottom, bottom["z"], n - 1, zb),
+        ):
+            dot = labelled.get(eq1_dot_id(ct_id, design))
+            if ct_id not in centres or dot is None:
+                continue
+            down = (f.pos[dot] - centres[ct_id][0]) / offset  # pixels per mm down the cell
+            pred = centres[ct_id][0] + down * (ct_z - z)
+            k = pool.unique_within(pred, p.anchor_gate * spacing_mm * np.linalg.norm(down))
+            if k < 0:
+                continue
+            anchors[index] = k
+            hints[index] = down * spacing_mm
+            pool.free[k] = False
+        labels = grow_chain(pool, anchors, n, cyclic=False, gate=p.gate, step_hint=hints, max_bracket=2)
+        for i, k in labels.items():
+            _assign(f, k, ls["first_id"] + i, ls["name"], 1.0 if i in anchors else 0.9)
+
+
+def _near_polyline(points: np.ndarray, line: np.ndarray, radius: np.ndarray) -> np.ndarray:
+    """Points within ``radius[k]`` of segment k of a polyline."""
+    out = np.zeros(len(points), bool)
+    for a, b, r in zip(line[:-1], line[1:], radius, strict=True):
+        ab = b - a
+        t = np.clip(((points - a) @ ab) / max(ab @ ab, 1e-12), 0, 1)
+        out |= np.linalg.norm(points - (a + t[:, None] * ab), axis=1) < r
+    return out
+
+
+def _seed_grid(pool: _Pool, start: int, down: np.ndarray, gate: float) -> dict[tuple[int, int], int] | None:
+    """A 3 x 3 grid seed around a dot: its neighbours below and in +theta fix the two grid steps,
+    and every node of the block must be the single dot within the gate of its prediction."""
+    right = np.array([down[1], -down[0]])  # seen from outside, +theta is `down` turned this way
+    d, idx = pool.tree.query(pool.pos[start], k=9)
+    steps = []
+    for axis in (down, right):
+        best = None
+        for dist, j in zip(d[1:], idx[1:], strict=True):
+            if not np.isfinite(dist) or j >= len(pool.pos) or not pool.free[j]:
+                continue
+            if (pool.pos[j] - pool.pos[start]) @ axis > dist * np.cos(np.radians(25)):
+                best = j
+                break
+        if best is None:
+            return None
+        steps.append(pool.pos[best] - pool.pos[start])
+    radius = gate * min(np.linalg.norm(steps[0]), np.linalg.norm(steps[1]))
+    seed = {}
+    for i in (-1, 0, 1):
+        for j in (-1, 0, 1):
+            k = pool.unique_within(pool.pos[start] + i * steps[0] + j * steps[1], radius)
+            if k < 0:
+                return None
+            seed[(i, j)] = k
+    return seed
+
+
+def _grid_phase(grid: dict, area: np.ndarray, p: IdentifyParams) -> tuple[int, int] | None:
+    """(row, col) residues mod 4 of the larger dots, from each dot's area over its neighbours'."""
+    la = {node: np.log(area[k]) for node, k in grid.items()}
+    sums = np.zeros((4, 4))
+    counts = np.zeros((4, 4))
+    for (i, j), v in la.items():
+        nb = [la[(i + di, j + dj)] for di, dj in NEIGHBOURS if (i + di, j + dj) in la]
+        if len(nb) >= 2:
+            sums[i % 4, j % 4] += v - np.mean(nb)
+            counts[i % 4, j % 4] += 1
+    mean = np.where(counts > 0, sums / np.maximum(counts, 1), -np.inf)
+    order = np.argsort(mean.ravel())[::-1]
+    best, second = mean.ravel()[order[0]], mean.ravel()[order[1]]
+    if counts.ravel()[order[0]] < 3 or best - second < p.phase_margin:
+        return None
+    return int(order[0] // 4), int(order[0] % 4)
+
+
+@dataclass(frozen=True)
+class _Anchor:
+    """A pedestal CT pair, or a single pedestal CT, that fixes the membrane columns under it."""
+
+    C: int  # the pair's column number (the top CT's ID offset + 1): c = (C - 1) * 4 + 1
+    top: tuple[np.ndarray, np.ndarray] | None  # (centre, ellipse map) of the top CT
+    bottom: tuple[np.ndarray, np.ndarray] | None
+
+
+def _pedestal_anchors(centres: dict, design: dict) -> list[_Anchor]:
+    """Pairs first (the paper's method), then single CTs whose partner was not decoded."""
+    ped = {s["surface"]: s for s in design["pedestal_targets"]["stripes"]}
+    top, bottom = ped["pedestal_top"], ped["pedestal_bottom"]
+    anchors = []
+    for k in range(top["count"]):
+        a, b = centres.get(top["first_id"] + k), centres.get(bottom["first_id"] + k)
+        if a is not None or b is not None:
+            anchors.append(_Anchor(k + 1, a, b))
+    return sorted(anchors, key=lambda x: x.top is None or x.bottom is None)
+
+
+def _axis_down(anchors: list[_Anchor]) -> np.ndarray:
+    """The image direction of -z along the specimen, from the decoded pedestal CTs."""
+    tops = [a.top[0] for a in anchors if a.top is not None]
+    bottoms = [a.bottom[0] for a in anchors if a.bottom is not None]
+    if not tops or not bottoms:
+        return np.array([0.0, 1.0])
+    d = np.mean(bottoms, axis=0) - np.mean(tops, axis=0)
+    return d / np.linalg.norm(d)
+
+
+MAX_TAN_PHI = 3.0  # beyond about 72 degrees off a CT's normal, its parallax is not trusted
+
+
+@dataclass(frozen=True)
+class _MembraneView:
+    """What the membrane labelling knows of the view: where the specimen's axis images, how
+    round a pedestal CT seen head-on looks, and the design's parallax numbers."""
+
+    axis_point: np.ndarray
+    q_max: float  # largest (width across / height along the axis) of the pedestal CTs' centre dots
+    proud_mm: float  # pedestal radius - membrane outer radius
+    column_mm: float  # membrane column pitch on its outer surface
+
+    @staticmethod
+    def of(regions, anchors, axis, pos, design) -> _MembraneView:
+        nodes = [k for g in regions for k in g.values()]
+        right = np.array([axis[1], -axis[0]])
+        q = [
+            ellipse_radius(e[1][None], right[None])[0] / ellipse_radius(e[1][None], axis[None])[0]
+            for a in anchors
+            for e in (a.top, a.bottom)
+            if e is not None
+        ]
+        r_m = design["specimen"]["diameter"] / 2 + design["specimen"]["membrane_thickness"]
+        return _MembraneView(
+            axis_point=np.median(pos[nodes], axis=0) if nodes else np.zeros(2),
+            q_max=max(q) if q else 1.0,
+            proud_mm=design["pedestal"]["radius"] - r_m,
+            column_mm=2 * np.pi * r_m / design["membrane"]["columns"],
+        )
+
+
+def _label_membrane(f: _Frame, pool: _Pool, centres: dict, design: dict, p: IdentifyParams) -> None:
+    m = design["membrane"]
+    rc = design["coded_target"]["centre_radius"]
+    anchors = _pedestal_anchors(centres, design)
+    axis = _axis_down(anchors)
+    area = f.blobs.area_px.to_numpy()
+    owner = np.full(len(f.pos), -1)
+    regions = []
+    for an in anchors:
+        if an.top is not None and an.bottom is not None:
+            down = an.bottom[0] - an.top[0]
+            down /= np.linalg.norm(down)
+            start_at = 0.5 * (an.top[0] + an.bottom[0])
+        else:
+            centre, mp = an.top or an.bottom
+            sign = 1.0 if an.top is not None else -1.0
+            down = axis
+            # a point on the membrane a quarter of its height from the CT's pedestal face
+            depth_mm = design["specimen"]["height"] / 4 + 12.5
+            start_at = centre + sign * down * depth_mm * ellipse_radius(mp[None], down[None])[0] / rc
+        _, start = pool.tree.query(start_at)
+        if owner[start] >= 0 or not pool.free[start]:
+            continue
+        seed = _seed_grid(pool, int(start), down, p.gate)
+        if seed is None:
+            continue
+        for k in seed.values():
+            pool.free[k] = False
+        grid = grow_grid(pool, seed, p.gate)
+        for k in grid.values():
+            owner[k] = len(regions)
+        regions.append(grid)
+    # then the dots no pedestal CT led to (beyond a longitudinal stripe's band): their regions
+    # are fixed across the band below
+    tops = [a.top[0] @ axis for a in anchors if a.top is not None]
+    bottoms = [a.bottom[0] @ axis for a in anchors if a.bottom is not None]
+    if tops and bottoms:
+        s = f.pos @ axis
+        for k in np.nonzero(pool.free & (s > np.mean(tops)) & (s < np.mean(bottoms)))[0]:
+            if not pool.free[k]:
+                continue
+            seed = _seed_grid(pool, int(k), axis, p.gate)
+            if seed is None:
+                continue
+            for j in seed.values():
+                pool.free[j] = False
+            regions.append(grow_grid(pool, seed, p.gate))
+    ctx = _MembraneView.of(regions, anchors, axis, f.pos, design)
+    phases = [_grid_phase(g, area, p) if len(g) >= p.min_region_dots else None for g in regions]
+    fixed: dict[int, tuple[int, int]] = {}
+    reasons: dict[int, str] = {}
+    for ri, grid in enumerate(regions):
+        res = _membrane_region_offsets(grid, phases[ri], anchors, f.pos, design, p, ctx)
+        if isinstance(res, str):
+            reasons[ri] = res
+        else:
+            fixed[ri] = res
+    # a region with no pedestal CT of its own (beyond a longitudinal stripe's band, towards a
+    # silhouette) is fixed across the band from a fixed neighbour, where the phase of the larger
+    # dots leaves exactly one choice
+    changed = True
+    while changed:
+        changed = False
+        for ri in [r for r in reasons if phases[r] is not None]:
+            for rj, off in list(fixed.items()):
+                res = _bridge(regions[ri], phases[ri], regions[rj], off, f.pos, axis, design)
+                if res is not None:
+                    fixed[ri] = res
+                    del reasons[ri]
+                    changed = True
+                    break
+    for ri, grid in enumerate(regions):
+        name = f"membrane_region_{ri}"
+        if ri in reasons:
+            f.reason[np.fromiter(grid.values(), int)] = reasons[ri]
+            continue
+        ids = _grid_ids(grid, *fixed[ri], design["membrane"])
+        for node, k in grid.items():
+            if node in ids:
+                _assign(f, k, ids[node], name, 0.9)
+            else:
+                f.reason[k] = "beyond the membrane's rows"
+
+
+def _bridge(grid, phase, other, other_off, pos, axis, design) -> tuple[int, int] | None:
+    """(column offset, row offset) of ``grid`` from a fixed neighbouring region ``other``.
+
+    Rows are matched along the specimen's axis between the two regions' facing columns; the
+    number of columns hidden between them is estimated from the gap and the columns' spacing,
+    and must be the one value within 1.5 columns of that estimate that puts this region's
+    larger dots on the design's larger columns and rows.
+    """
+    m = design["membrane"]
+    step, first = m["large_step"], m["large_first"]
+    right = np.array([axis[1], -axis[0]])
+    a_nodes = np.array(list(grid.keys()))
+    b_nodes = np.array(list(other.keys()))
+    a_xy = pos[np.fromiter(grid.values(), int)]
+    b_xy = pos[np.fromiter(other.values(), int)]
+    side = np.sign(np.median(a_xy @ right) - np.median(b_xy @ right))
+    if side == 0:
+        return None
+    # facing columns: this region's column nearest the other, and the other's nearest this one
+    a_col = {int(j): float(np.median(a_xy[a_nodes[:, 1] == j] @ right)) for j in np.unique(a_nodes[:, 1])}
+    b_col = {int(j): float(np.median(b_xy[b_nodes[:, 1] == j] @ right)) for j in np.unique(b_nodes[:, 1])}
+    ja = min(a_col, key=lambda j: side * a_col[j])
+    jb = max(b_col, key=lambda j: side * b_col[j])
+    ja2, jb2 = ja + int(side), jb - int(side)  # one column further in, to measure the spacing
+    if ja2 not in a_col or jb2 not in b_col:
+        return None
+    sa = {int(i): p for (i, j), p in zip(a_nodes, a_xy, strict=True) if j == ja}
+    sb = {int(i): p for (i, j), p in zip(b_nodes, b_xy, strict=True) if j == jb}
+    if len(sa) < 5 or len(sb) < 5:
+        return None
+    ib = np.array(list(sb))
+    zb = np.array([sb[i] @ axis for i in ib])
+    pitch = np.median(np.abs(np.diff(zb[np.argsort(ib)])))
+    shifts, gaps = [], []
+    for i, pa in sa.items():
+        k = int(np.argmin(np.abs(zb - pa @ axis)))
+        if abs(zb[k] - pa @ axis) < 0.35 * pitch:
+            shifts.append(int(ib[k]) - i)
+            gaps.append(abs((pa - sb[int(ib[k])]) @ right))
+    if len(shifts) < 5:
+        return None
+    values, counts = np.unique(shifts, return_counts=True)
+    if counts.max() < 0.8 * len(shifts):
+        return None
+    di = int(values[np.argmax(counts)])
+    spacing = 0.5 * (abs(a_col[ja2] - a_col[ja]) + abs(b_col[jb2] - b_col[jb]))
+    n_est = float(np.median(gaps)) / spacing  # columns from jb to ja
+    c_off_b, r_off_b = other_off
+    r_off = r_off_b + di
+    pi, pj = phase
+    if (pi + r_off - first) % step:
+        return None  # the rows across the band do not put the larger dots on larger rows
+    c_b = jb + c_off_b  # column number (unwrapped) of the other's facing column
+    fits = [
+        n for n in range(1, int(n_est) + 3)
+        if abs(n - n_est) < 1.5 and (pj + c_b + side * n - ja - first) % step == 0
+    ]  # fmt: skip
+    if len(fits) != 1:
+        return None
+    c_off = int((c_b + side * fits[0] - ja) % m["columns"])
+    return c_off, r_off
+
+
+def _grid_ids(grid: dict, c_off: int, r_off: int, m: dict) -> dict:
+    """Node -> membrane ID (Eq. 4) for a region with known offsets; nodes beyond the rows left out."""
+    out = {}
+    for i, j in grid:
+        r, c = i + r_off, (j + c_off - 1) % m["columns"] + 1
+        if 1 <= r <= m["rows"]:  # beyond: not a membrane dot (a pedestal edge fragment, ...)
+            out[(i, j)] = (r - 1) * m["columns"] + c + m["first_id"] - 1
+    return out
+
+
+def _grid_steps(grid: dict, pos: np.ndarray, nodes: list, di: int, dj: int) -> np.ndarray:
+    """Image steps from the given nodes to their (di, dj) neighbours, where labelled."""
+    return np.array([pos[grid[(i + di, j + dj)]] - pos[grid[(i, j)]] for i, j in nodes if (i + di, j + dj) in grid])
+
+
+def _anchor_offsets(an: _Anchor, grid, nodes, xy, phase, pos, design, p, ctx) -> tuple[int, int] | None:
+    """(column offset, row offset) of a grid region from one anchor; None when it cannot tell."""
+    m = design["membrane"]
+    rc = design["coded_target"]["centre_radius"]
+    z_from_face = design["pedestal_targets"]["stripes"][0]["z_from_face"]
+    pitch_mm = design["specimen"]["height"] / m["rows"]
+    step, first = m["large_step"], m["large_first"]
+    pi, pj = phase
+    ends = [e for e in (an.top, an.bottom) if e is not None]
+    p0 = ends[0][0]
+    if len(ends) == 2:
+        down = an.bottom[0] - an.top[0]
+        down /= np.linalg.norm(down)
+    else:
+        near = np.argsort(np.linalg.norm(xy - p0, axis=1))[:30]
+        steps = _grid_steps(grid, pos, [tuple(nodes[k]) for k in near], 1, 0)
+        if len(steps) < 3:
+            return None
+        down = np.median(steps, axis=0)
+        down /= np.linalg.norm(down)
+    right = np.array([down[1], -down[0]])
+    near = np.argsort(np.linalg.norm(xy - p0, axis=1))[:30]
+    gaps = _grid_steps(grid, pos, [tuple(nodes[k]) for k in near], 0, 1)
+    if len(gaps) < 3:
+        return None
+    col_px = float(np.median(np.linalg.norm(gaps, axis=1)))
+    # parallax: the CTs stand proud of the membrane by `proud` mm, so seen at an angle phi off
+    # their normal the membrane column under them appears shifted towards the specimen's axis
+    # by proud * sin(phi), i.e. (proud / column pitch) * tan(phi) columns
+    cos_phi = np.mean([
+        min(1.0, ellipse_radius(e[1][None], right[None])[0] / ellipse_radius(e[1][None], down[None])[0] / ctx.q_max)
+        for e in ends
+    ])  # fmt: skip
+    tan_phi = min(np.sqrt(max(1 - cos_phi**2, 0.0)) / max(cos_phi, 1e-3), MAX_TAN_PHI)
+    side = np.sign((p0 - ctx.axis_point) @ right)
+    expected = -side * col_px * ctx.proud_mm / ctx.column_mm * tan_phi
+    perp = (xy - p0) @ right - expected
+    dist_ends = np.min([np.linalg.norm(xy - e[0], axis=1) for e in ends], axis=0)
+    cols = {}
+    for j in np.unique(nodes[:, 1]):
+        if (j - pj) % step:
+            continue
+        sel = np.nonzero(nodes[:, 1] == j)[0]
+        if len(sel) < 2:
+            continue
+        use = sel[np.argsort(dist_ends[sel])[:3]]  # the column's dots nearest the CTs: no bulge
+        cols[int(j)] = float(np.median(perp[use]))
+    if not cols:
+        return None
+    ranked = sorted(cols, key=lambda j: abs(cols[j]))
+    jc = ranked[0]
+    sel = np.nonzero(nodes[:, 1] == jc)[0]
+    if abs(cols[jc]) > 1.5 * col_px:
+        return None  # the anchor's column is not in this region
+    if len(ranked) > 1 and abs(cols[ranked[1]]) < 2 * abs(cols[jc]):
+        return None  # seen too obliquely to tell its column
+    c_off = step * (an.C - 1) + first - jc
+    # rows: the end rows lie z_from_face + pitch / 2 from the CT centres, along the column
+    estimates = []
+    i_col = nodes[sel, 0]
+    for end, sign in ((an.top, 1.0), (an.bottom, -1.0)):
+        if end is None:
+            continue
+        centre, mp = end
+        mm_per_px = rc / ellipse_radius(mp[None], down[None])[0]
+        d_mm = np.abs((xy[sel] - centre) @ down) * mm_per_px
+        rows_in = (d_mm - z_from_face) / pitch_mm
+        r_est = 0.5 + rows_in if sign > 0 else m["rows"] + 0.5 - rows_in
+        near_end = rows_in <= 8
+        if near_end.sum() >= 2:
+            estimates.append(float(np.median(r_est[near_end] - i_col[near_end])))
+    if not estimates:
+        return None
+    base = (first - pi) % step
+    r_off = base + step * round((np.mean(estimates) - base) / step)
+    if any(abs(e - r_off) > p.row_tolerance for e in estimates):
+        return None
+    return c_off % m["columns"], int(r_off)
+
+
+def _membrane_region_offsets(grid, phase, anchors, pos, design, p, ctx):
+    """(column offset, row offset) of one grown grid region from the pedestal CTs, or the reason
+    it cannot be fixed."""
+    if len(grid) < p.min_region_dots:
+        return "membrane region too small"
+    if phase is None:
+        return "larger membrane dots not distinguishable"
+    nodes = np.array(list(grid.keys()))
+    xy = pos[np.fromiter(grid.values(), int)]
+    offsets = {}
+    for an in anchors:
+        off = _anchor_offsets(an, grid, nodes, xy, phase, pos, design, p, ctx)
+        if off is not None:
+            offsets.setdefault(off, []).append(an)
+    if not offsets:
+        return "no pedestal CT fixes this membrane region"
+    if len(offsets) > 1:
+        return "pedestal CTs disagree on this membrane region"
+    return next(iter(offsets))
+
+
+def identify(
+    blobs: pd.DataFrame,
+    cts: pd.DataFrame,
+    design: dict,
+    undistort,
+    dots: np.ndarray,
+    params: IdentifyParams | None = None,
+) -> pd.DataFrame:
+    """Label one frame's detections (see the module docstring).
+
+    ``blobs``/``cts``: from :func:`triaxtrack.detect.detect_blobs` and
+    :func:`~triaxtrack.detect.decode_coded_targets`; ``dots``: the blobs that pass the dot
+    criteria (:func:`~triaxtrack.detect.dot_mask`); ``undistort``: (N, 2) distorted pixels ->
+    undistorted pixels. Returns one row per CT and per dot (columns ``LABEL_COLUMNS``), ``id``
+    -1 with a ``reason`` where the dot could not be labelled beyond doubt.
+    """
+    p = params or IdentifyParams()
+    uv = blobs[["u_px", "v_px"]].to_numpy()
+    pos = undistort(uv) if len(uv) else uv.copy()
+    n = len(blobs)
+    f = _Frame(
+        blobs=blobs,
+        pos=pos,
+        ids=np.full(n, UNLABELLED, np.int64),
+        group=np.full(n, "", object),
+        quality=np.zeros(n),
+        reason=np.full(n, "not reached from any coded target", object),
+    )
+    in_ct = _inside_cts(f, cts, design["coded_target"])
+    candidates = np.asarray(dots, bool) & ~in_ct
+    centres = _ct_maps(f, cts, undistort)
+    pool = _Pool(pos, candidates, blobs)
+    _label_cell_stripes(f, pool, centres, design, p)
+    _label_longitudinal(f, pool, centres, design, p)
+    # the white band of a longitudinal stripe hides the membrane behind it: nothing there is a
+    # membrane dot, so drop what remains near the stripe's labelled dots
+    long_names = {s["name"] for s in design["cell_targets"]["longitudinal_stripes"]}
+    for name in long_names:
+        sel = np.nonzero(f.group == name)[0]
+        if len(sel) >= 2:
+            order = sel[np.argsort(f.ids[sel])]
+            line = pos[order]
+            seg = np.linalg.norm(np.diff(line, axis=0), axis=1)
+            half = design["cell_targets"]["longitudinal_band_width"] / 2
+            spacing_mm = (
+                design["cell_targets"]["longitudinal_z_top"] - design["cell_targets"]["longitudinal_z_bottom"]
+            ) / (design["cell_targets"]["longitudinal_stripes"][0]["count"] - 1)
+            gaps = np.diff(f.ids[order])
+            radius = seg / np.maximum(gaps, 1) / spacing_mm * (half + BAND_MARGIN_MM)
+            hide = _near_polyline(pos, line, radius) & pool.free
+            pool.free[hide] = False
+            f.reason[hide] = "on a longitudinal stripe's band"
+    _label_membrane(f, pool, centres, design, p)
+    # a dot too small or seen too obliquely has no accurate centroid: not reported
+    for bad, why in (
+        (blobs.area_px.to_numpy() < p.min_label_area_px, "too small for an accurate centroid"),
+        (blobs.roundness.to_numpy() < p.min_label_roundness, "seen too obliquely for an accurate centroid"),
+    ):
+        bad &= f.ids != UNLABELLED
+        f.ids[bad] = UNLABELLED
+        f.reason[bad] = why
+    ct_rows = pd.DataFrame({
+        "id": cts.id.to_numpy(np.int64), "kind": "coded", "group": "coded",
+        "u_px": cts.u_px.to_numpy(), "v_px": cts.v_px.to_numpy(),
+        "u_undist_px": pos[cts.blob.to_numpy(), 0] if len(cts) else [],
+        "v_undist_px": pos[cts.blob.to_numpy(), 1] if len(cts) else [],
+        "area_px": blobs.area_px.to_numpy()[cts.blob.to_numpy()] if len(cts) else [],
+        "roundness": blobs.roundness.to_numpy()[cts.blob.to_numpy()] if len(cts) else [],
+        "quality": cts.confidence.to_numpy(), "reason": "",
+    })  # fmt: skip
+    sel = np.nonzero(candidates)[0]
+    dot_rows = pd.DataFrame({
+        "id": f.ids[sel], "kind": "dot", "group": f.group[sel],
+        "u_px": uv[sel, 0], "v_px": uv[sel, 1], "u_undist_px": pos[sel, 0], "v_undist_px": pos[sel, 1],
+        "area_px": blobs.area_px.to_numpy()[sel], "roundness": blobs.roundness.to_numpy()[sel],
+        "quality": f.quality[sel], "reason": f.reason[sel],
+    })  # fmt: skip
+    return pd.concat([ct_rows, dot_rows], ignore_index=True)[LABEL_COLUMNS]
