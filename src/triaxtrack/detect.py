@@ -160,13 +160,16 @@ def detect_blobs(gray: np.ndarray, params: DetectParams | None = None) -> pd.Dat
         "roundness": minor / major,
         "fill": area[idx] / (np.pi * major * minor / 4),
         "contrast": peak[idx],
-        "background": bg[
-            np.clip(np.rint(my).astype(int), 0, g.shape[0] - 1), np.clip(np.rint(mx).astype(int), 0, g.shape[1] - 1)
-        ],
+        "background": bg[_pixel(my, g.shape[0]), _pixel(mx, g.shape[1])],
         "cov_uu": cuu,
         "cov_uv": cuv,
         "cov_vv": cvv,
     })  # fmt: skip
+
+
+def _pixel(x: np.ndarray, size: int) -> np.ndarray:
+    """Nearest pixel index of sub-pixel coordinates, clipped to the image."""
+    return np.clip(np.rint(x), 0, size - 1).astype(int)
 
 
 def dot_mask(blobs: pd.DataFrame, params: DetectParams | None = None) -> np.ndarray:

@@ -38,6 +38,7 @@ from scipy.spatial import cKDTree
 from triaxtrack.detect import ellipse_maps
 
 UNLABELLED = -1
+FAR_PX = 1e9
 # membrane dots whose image comes this close (mm on the cell wall) to a longitudinal band may be
 # partly hidden by it, which biases their centroid: they are not labelled
 BAND_MARGIN_MM = 1.5
@@ -488,6 +489,14 @@ def _axis_down(anchors: list[_Anchor]) -> np.ndarray:
     return d / np.linalg.norm(d)
 
 
+def _width_ratio(ellipse_map: np.ndarray, down: np.ndarray) -> float:
+    """An ellipse's radius across ``down`` over its radius along it."""
+    right = np.array([down[1], -down[0]])
+    return float(
+        ellipse_radius(ellipse_map[None], right[None])[0] / ellipse_radius(ellipse_map[None], down[None])[0]
+    )
+
+
 MAX_TAN_PHI = 3.0  # beyond about 72 degrees off a CT's normal, its parallax is not trusted
 
 
@@ -504,13 +513,7 @@ class _MembraneView:
     @staticmethod
     def of(regions, anchors, axis, pos, design) -> _MembraneView:
         nodes = [k for g in regions for k in g.values()]
-        right = np.array([axis[1], -axis[0]])
-        q = [
-            ellipse_radius(e[1][None], right[None])[0] / ellipse_radius(e[1][None], axis[None])[0]
-            for a in anchors
-            for e in (a.top, a.bottom)
-            if e is not None
-        ]
+        q = [_width_ratio(e[1], axis) for a in anchors for e in (a.top, a.bottom) if e is not None]
         r_m = design["specimen"]["diameter"] / 2 + design["specimen"]["membrane_thickness"]
         return _MembraneView(
             axis_point=np.median(pos[nodes], axis=0) if nodes else np.zeros(2),
@@ -521,7 +524,6 @@ class _MembraneView:
 
 
 def _label_membrane(f: _Frame, pool: _Pool, centres: dict, design: dict, p: IdentifyParams) -> None:
-    m = design["membrane"]
     rc = design["coded_target"]["centre_radius"]
     anchors = _pedestal_anchors(centres, design)
     axis = _axis_down(anchors)
@@ -679,7 +681,9 @@ def _grid_ids(grid: dict, c_off: int, r_off: int, m: dict) -> dict:
 
 def _grid_steps(grid: dict, pos: np.ndarray, nodes: list, di: int, dj: int) -> np.ndarray:
     """Image steps from the given nodes to their (di, dj) neighbours, where labelled."""
-    return np.array([pos[grid[(i + di, j + dj)]] - pos[grid[(i, j)]] for i, j in nodes if (i + di, j + dj) in grid])
+    return np.array(
+        [pos[grid[(i + di, j + dj)]] - pos[grid[(i, j)]] for i, j in nodes if (i + di, j + dj) in grid]
+    )
 
 
 def _anchor_offsets(an: _Anchor, grid, nodes, xy, phase, pos, design, p, ctx) -> tuple[int, int] | None:
@@ -711,10 +715,7 @@ def _anchor_offsets(an: _Anchor, grid, nodes, xy, phase, pos, design, p, ctx) ->
     # parallax: the CTs stand proud of the membrane by `proud` mm, so seen at an angle phi off
     # their normal the membrane column under them appears shifted towards the specimen's axis
     # by proud * sin(phi), i.e. (proud / column pitch) * tan(phi) columns
-    cos_phi = np.mean([
-        min(1.0, ellipse_radius(e[1][None], right[None])[0] / ellipse_radius(e[1][None], down[None])[0] / ctx.q_max)
-        for e in ends
-    ])  # fmt: skip
+    cos_phi = np.mean([min(1.0, _width_ratio(e[1], down) / ctx.q_max) for e in ends])
     tan_phi = min(np.sqrt(max(1 - cos_phi**2, 0.0)) / max(cos_phi, 1e-3), MAX_TAN_PHI)
     side = np.sign((p0 - ctx.axis_point) @ right)
     expected = -side * col_px * ctx.proud_mm / ctx.column_mm * tan_phi
@@ -802,6 +803,8 @@ def identify(
     p = params or IdentifyParams()
     uv = blobs[["u_px", "v_px"]].to_numpy()
     pos = undistort(uv) if len(uv) else uv.copy()
+    invertible = np.isfinite(pos).all(axis=1)
+    pos = np.where(invertible[:, None], pos, FAR_PX)  # beyond the lens model: never a candidate
     n = len(blobs)
     f = _Frame(
         blobs=blobs,
@@ -812,7 +815,7 @@ def identify(
         reason=np.full(n, "not reached from any coded target", object),
     )
     in_ct = _inside_cts(f, cts, design["coded_target"])
-    candidates = np.asarray(dots, bool) & ~in_ct
+    candidates = np.asarray(dots, bool) & ~in_ct & invertible
     centres = _ct_maps(f, cts, undistort)
     pool = _Pool(pos, candidates, blobs)
     _label_cell_stripes(f, pool, centres, design, p)
@@ -861,3 +864,58 @@ def identify(
         "quality": f.quality[sel], "reason": f.reason[sel],
     })  # fmt: skip
     return pd.concat([ct_rows, dot_rows], ignore_index=True)[LABEL_COLUMNS]
+
+
+def undistorted_pixels(camera) -> callable:
+    """(N, 2) distorted pixels -> undistorted pixels of ``camera`` (NaN where not invertible)."""
+    from triaxtrack.optics import pixels_to_normalized
+
+    K = np.asarray(camera.K, np.float64)
+
+    def undistort(uv: np.ndarray) -> np.ndarray:
+        xy = pixels_to_normalized(camera, uv)
+        return xy @ K[:2, :2].T + K[:2, 2]
+
+    return undistort
+
+
+def label_frame(gray: np.ndarray, camera, design: dict, codes: dict[int, int], detect_params=None,
+                identify_params: IdentifyParams | None = None) -> pd.DataFrame:  # fmt: skip
+    """Detect and identify every target in one grey frame of a calibrated ``camera``
+    (:class:`triaxtrack.optics.Camera`, intrinsics used). Columns ``LABEL_COLUMNS``."""
+    from triaxtrack.detect import decode_coded_targets, detect_blobs, dot_mask
+
+    blobs = detect_blobs(gray, detect_params)
+    cts = decode_coded_targets(gray, blobs, codes, design["coded_target"], detect_params)
+    return identify(blobs, cts, design, undistorted_pixels(camera), dot_mask(blobs, detect_params),
+                    identify_params)  # fmt: skip
+
+
+def draw_labels(gray: np.ndarray, labels: pd.DataFrame, scale: int = 2) -> np.ndarray:
+    """A BGR picture of the frame with every labelled target's ID, for a person to check.
+
+    Green: CTs (ID printed); cyan: cell dots; yellow: membrane dots (ID printed on the larger
+    ones and every tenth); red crosses: detections left unlabelled.
+    """
+    import cv2
+
+    img = cv2.cvtColor(np.asarray(gray, np.uint8), cv2.COLOR_GRAY2BGR)
+    img = cv2.resize(img, None, fx=scale, fy=scale, interpolation=cv2.INTER_LINEAR)
+    font = cv2.FONT_HERSHEY_SIMPLEX
+    for r in labels.itertuples(index=False):
+        c = (int(round((r.u_px + 0.5) * scale - 0.5)), int(round((r.v_px + 0.5) * scale - 0.5)))
+        if r.id == UNLABELLED:
+            cv2.drawMarker(img, c, (0, 0, 255), cv2.MARKER_TILTED_CROSS, 3 * scale, 1)
+            continue
+        if r.kind == "coded":
+            colour, text = (0, 220, 0), str(r.id)
+        elif str(r.group).startswith("membrane"):
+            colour, text = (0, 220, 220), str(r.id) if r.id % 10 == 0 else ""
+        else:
+            colour, text = (220, 220, 0), str(r.id) if r.id % 4 == 1 else ""
+        cv2.circle(img, c, 2 * scale, colour, 1, cv2.LINE_AA)
+        if text:
+            cv2.putText(
+                img, text, (c[0] + 3 * scale, c[1] - 2 * scale), font, 0.3 * scale, colour, 1, cv2.LINE_AA
+            )
+    return img
