@@ -18,6 +18,9 @@ configfile: "config/config.yaml"
 include: "workflow/rules/common.smk"
 include: "workflow/rules/kit.smk"
 include: "workflow/rules/simulate.smk"
+include: "workflow/rules/calibrate.smk"
+include: "workflow/rules/frames.smk"
+include: "workflow/rules/identify.smk"
 include: "workflow/rules/inventory.smk"
 
 

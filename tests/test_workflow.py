@@ -15,6 +15,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pandas as pd
 import pytest
 import yaml
 
@@ -66,8 +67,9 @@ def write_yaml(path: Path, data: dict) -> Path:
 
 
 def recorded_folder(root: Path, test_yaml: dict) -> Path:
-    """A recorded test folder: test.yaml and an (empty) video per camera."""
+    """A recorded test folder: test.yaml, an (empty) video per camera and an (empty) kit/."""
     write_yaml(root / "test.yaml", test_yaml)
+    (root / "kit").mkdir()
     (root / "videos").mkdir()
     for camera in test_yaml.get("cameras", []):
         name = camera if isinstance(camera, str) else camera["name"]
@@ -85,6 +87,7 @@ def test_default_config_is_demo_13_cameras_2_chunks():
     assert counts["render_calibration"] == 13
     assert counts["simulate_scene"] == counts["simulate_truth"] == counts["check_simulation"] == 1
     assert counts["make_kit"] == 1
+    assert counts["calibrate_camera"] == counts["frame_map"] == 13
 
 
 def test_simulated_jobs_are_cameras_times_chunks(tmp_path):
@@ -101,6 +104,7 @@ def test_simulated_jobs_are_cameras_times_chunks(tmp_path):
     assert counts["render_calibration"] == 3
     assert counts["simulate_truth"] == 1
     assert counts["check_simulation"] == 1
+    assert counts["calibrate_camera"] == counts["frame_map"] == 3
     assert "probe_video" not in counts
 
 
@@ -117,11 +121,14 @@ def test_one_recorded_folder_from_the_command_line(tmp_path):
     counts = dry_run("--config", f"test={folder}")
     assert counts["probe_video"] == 2
     assert counts["inventory"] == 1
+    assert counts["calibrate_camera"] == counts["frame_map"] == counts["identify_targets"] == 2
     assert "simulate_scene" not in counts and "render_video_chunk" not in counts
 
 
 def test_simulated_and_recorded_tests_together(tmp_path):
-    folder = recorded_folder(tmp_path / "rec", {"name": "ignored", "fps": 25, "cameras": ["a", "b", "c"]})
+    folder = recorded_folder(
+        tmp_path / "rec", {"name": "ignored", "fps": 25, "frames": 60, "cameras": ["a", "b", "c"]}
+    )
     config = write_yaml(
         tmp_path / "config.yaml",
         {
@@ -135,6 +142,9 @@ def test_simulated_and_recorded_tests_together(tmp_path):
     counts = dry_run("--configfile", str(config))
     assert counts["render_video_chunk"] == 4 * 3
     assert counts["probe_video"] == 3
+    assert counts["calibrate_camera"] == counts["frame_map"] == 4 + 3
+    assert counts["identify_targets"] == 4 * 3 + 3 * 2  # per camera and chunk
+    assert counts["collect_labels"] == 2
 
 
 def test_invalid_test_yaml_names_the_file(tmp_path):
@@ -191,7 +201,8 @@ def test_snakefmt_is_clean():
 
 def test_tiny_simulation_end_to_end_then_inventory(tmp_path):
     """Simulate a tiny test in a copy of the workflow, then take its folder as a recorded test.
-    About 15 s: 3 cameras x 3 frames at 320 x 180, two chunks per camera."""
+    About 20 s: 3 cameras x 3 frames at 320 x 180, two chunks per camera, 4 board images each
+    (calibrated with min_images 3: enough to run the rule, not for an accurate calibration)."""
     work = tmp_path / "work"
     work.mkdir()
     shutil.copy(REPO / "Snakefile", work)
@@ -209,10 +220,11 @@ def test_tiny_simulation_end_to_end_then_inventory(tmp_path):
                         "frames": 3,
                         "width": 320,
                         "height": 180,
-                        "calibration_images": 1,
+                        "calibration_images": 4,
                     },
                 }
             ],
+            "calibration": {"min_images": 3},
         },
     )
     proc = run_snakemake("--cores", "2", "--configfile", str(config), workdir=work)
@@ -227,6 +239,11 @@ def test_tiny_simulation_end_to_end_then_inventory(tmp_path):
     assert check["frames_expected"] == 3
     assert all(c["frames"] == 3 for c in check["cameras"].values())
     assert not list((work / "results" / "tiny" / "sim_chunks").rglob("*.mp4"))  # temp()
+    for camera in ("cam01", "cam02", "cam03"):
+        calibration = json.loads((work / "results" / "tiny" / "calibration" / f"{camera}.json").read_text())
+        assert (calibration["camera"], calibration["width"], calibration["n_images"]) == (camera, 320, 4)
+        frames = pd.read_parquet(work / "results" / "tiny" / "frames" / f"{camera}.parquet")
+        assert frames.video_index.tolist() == [0, 1, 2] and not frames.missing.any()
 
     proc = run_snakemake(
         "--cores", "2", "--configfile", str(config), "--config", f"test={test_dir}", workdir=work

@@ -89,7 +89,11 @@ def build_parser() -> argparse.ArgumentParser:
     from triaxtrack.simulate import SimulationConfig
 
     for f in fields(SimulationConfig):
-        typ = {"int": int, "float": float, "str": str}[f.type if isinstance(f.type, str) else f.type.__name__]
+        typ = {"int": int, "float": float, "str": str}.get(
+            f.type if isinstance(f.type, str) else f.type.__name__
+        )
+        if typ is None:
+            continue  # per-camera mappings (start_offset_s, dropped_frames): config files only
         s.add_argument(f"--{f.name.replace('_', '-')}", dest=f.name, type=typ, default=None,
                        help=f"default {f.default}")  # fmt: skip
     s.set_defaults(func=_simulate)

@@ -20,8 +20,10 @@ says ``undist`` (ideal pinhole pixels of the same camera matrix, see :func:`undi
   ring of ``sectors`` code sectors, a white surround. The centre dot's moment ellipse gives the
   local affine map from the printed target to the image, so the ring is read where the design
   puts it, at any roll and obliquity. Each sector's mean grey level must lie clearly on one side
-  of the mid-level (``ct_min_confidence``); the code must match a kit code exactly, or differ in
-  the one sector read least confidently. Anything else is rejected, never guessed.
+  of the mid-level (``ct_min_confidence``); the code must match a kit code exactly (by default;
+  ``ct_max_corrected = 1`` also accepts a difference in the one sector read least confidently:
+  a target partly hidden by a longitudinal band can read as a neighbour of another code).
+  Anything else is rejected, never guessed.
 """
 
 from __future__ import annotations
@@ -62,6 +64,7 @@ class DetectParams:
     ct_min_area_px: int = 12
     ct_min_confidence: float = 0.3  # each sector at least 15 % of the contrast from the mid-level
     ct_min_white: float = 0.6  # normalised level the white gap and surround must reach
+    ct_max_corrected: int = 0  # sectors a code may be corrected by (0: exact matches only)
     ct_outer_white_fraction: float = 0.7  # share of the surround that must be white
 
 
@@ -315,7 +318,7 @@ def decode_coded_targets(
     for i in np.nonzero(ok)[0]:
         word = int(sum(int(b) << j for j, b in enumerate(best_bits[i])))
         tid, dist, matched, other = book.nearest(word)
-        if dist > 1 or other <= dist + 1:
+        if dist > p.ct_max_corrected or other <= dist + 1:
             continue
         if dist == 1:
             flipped = int(np.log2(word ^ matched))

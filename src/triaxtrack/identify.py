@@ -186,7 +186,7 @@ def grow_chain(
 
 NEIGHBOURS = ((1, 0), (-1, 0), (0, 1), (0, -1))
 MIN_SUPPORT = 3  # labelled nodes among the 8 around a node before it is predicted
-AREA_RANGE = (0.4, 2.5)  # a grid dot's area over its labelled neighbours' median
+AREA_RANGE = (0.45, 1.85)  # a grid dot's area over its labelled neighbours' median
 WHITE_TOLERANCE = 0.08  # a grid dot's local white level may differ this much from its neighbours'
 
 
@@ -306,6 +306,37 @@ def _inside_cts(f: _Frame, cts: pd.DataFrame, ct_design: dict) -> np.ndarray:
             local = np.linalg.solve(m, (uv[near] - (cu, cv)).T).T
             inside[np.asarray(near)[np.linalg.norm(local, axis=1) < extent]] = True
     return inside
+
+
+def _ct_stripes(design: dict) -> dict[int, tuple[str, int, int]]:
+    """CT id -> (stripe name, first id, count) for every CT stripe of the design."""
+    out = {}
+    stripes = design["pedestal_targets"]["stripes"] + design["cell_targets"]["ct_stripes"]
+    for st in stripes:
+        for i in range(st["count"]):
+            out[st["first_id"] + i] = (st["name"], st["first_id"], st["count"])
+    return out
+
+
+def _plausible_cts(cts: pd.DataFrame, design: dict) -> pd.DataFrame:
+    """Drop CTs whose place in the image contradicts their ID: among a CT's two nearest decoded
+    CTs there must be one of its own stripe whose ID is at most two steps away (a misread
+    partly hidden target decodes to a valid but far-away code)."""
+    if len(cts) < 3:
+        return cts
+    stripes = _ct_stripes(design)
+    uv = cts[["u_px", "v_px"]].to_numpy()
+    ids = cts.id.to_numpy()
+    _, near = cKDTree(uv).query(uv, k=3)
+    keep = np.zeros(len(cts), bool)
+    for a in range(len(cts)):
+        name, first, count = stripes[int(ids[a])]
+        for b in near[a, 1:]:
+            nb, _, _ = stripes[int(ids[b])]
+            steps = (int(ids[b]) - int(ids[a])) % count
+            if nb == name and min(steps, count - steps) <= 2:
+                keep[a] = True
+    return cts[keep].reset_index(drop=True)
 
 
 def _theta_dir(ct_id: int, first: int, count: int, centres: dict) -> np.ndarray | None:
@@ -691,7 +722,6 @@ def _anchor_offsets(an: _Anchor, grid, nodes, xy, phase, pos, design, p, ctx) ->
     m = design["membrane"]
     rc = design["coded_target"]["centre_radius"]
     z_from_face = design["pedestal_targets"]["stripes"][0]["z_from_face"]
-    pitch_mm = design["specimen"]["height"] / m["rows"]
     step, first = m["large_step"], m["large_first"]
     pi, pj = phase
     ends = [e for e in (an.top, an.bottom) if e is not None]
@@ -740,7 +770,9 @@ def _anchor_offsets(an: _Anchor, grid, nodes, xy, phase, pos, design, p, ctx) ->
     if len(ranked) > 1 and abs(cols[ranked[1]]) < 2 * abs(cols[jc]):
         return None  # seen too obliquely to tell its column
     c_off = step * (an.C - 1) + first - jc
-    # rows: the end rows lie z_from_face + pitch / 2 from the CT centres, along the column
+    # rows: the membrane's end row lies half a row pitch from the pedestal face, which is
+    # z_from_face from the CT centres (rigid); the pitch is measured on the column itself, as
+    # the membrane may be strained unevenly
     estimates = []
     i_col = nodes[sel, 0]
     for end, sign in ((an.top, 1.0), (an.bottom, -1.0)):
@@ -749,11 +781,14 @@ def _anchor_offsets(an: _Anchor, grid, nodes, xy, phase, pos, design, p, ctx) ->
         centre, mp = end
         mm_per_px = rc / ellipse_radius(mp[None], down[None])[0]
         d_mm = np.abs((xy[sel] - centre) @ down) * mm_per_px
-        rows_in = (d_mm - z_from_face) / pitch_mm
-        r_est = 0.5 + rows_in if sign > 0 else m["rows"] + 0.5 - rows_in
-        near_end = rows_in <= 8
-        if near_end.sum() >= 2:
-            estimates.append(float(np.median(r_est[near_end] - i_col[near_end])))
+        order = np.argsort(d_mm)[:4]
+        di = np.abs(np.diff(i_col[order]))
+        if len(order) < 3 or np.any(di != 1):
+            continue  # the column's end rows are not all there
+        pitch = float(np.median(np.abs(np.diff(d_mm[order]))))
+        rows_from_face = (d_mm[order[0]] - z_from_face) / pitch
+        r_first = 0.5 + rows_from_face if sign > 0 else m["rows"] + 0.5 - rows_from_face
+        estimates.append(float(r_first - i_col[order[0]]))
     if not estimates:
         return None
     base = (first - pi) % step
@@ -815,6 +850,7 @@ def identify(
         reason=np.full(n, "not reached from any coded target", object),
     )
     in_ct = _inside_cts(f, cts, design["coded_target"])
+    cts = _plausible_cts(cts, design)
     candidates = np.asarray(dots, bool) & ~in_ct & invertible
     centres = _ct_maps(f, cts, undistort)
     pool = _Pool(pos, candidates, blobs)
@@ -919,3 +955,20 @@ def draw_labels(gray: np.ndarray, labels: pd.DataFrame, scale: int = 2) -> np.nd
                 img, text, (c[0] + 3 * scale, c[1] - 2 * scale), font, 0.3 * scale, colour, 1, cv2.LINE_AA
             )
     return img
+
+
+def label_chunk_start(
+    video_path, fmap: pd.DataFrame, camera, design: dict, codes: dict[int, int], start: int, stop: int
+) -> tuple[int | None, np.ndarray | None, pd.DataFrame]:
+    """Label the first frame of the chunk ``[start, stop)`` that the camera recorded.
+
+    Returns ``(frame, image, labels)``; ``frame`` is None (and ``labels`` empty) when the camera
+    recorded none of the chunk's frames. ``labels`` carries ``camera`` and ``frame`` columns.
+    """
+    from triaxtrack.frames import iter_test_frames
+
+    for k, image in iter_test_frames(video_path, fmap, start, stop):
+        if image is not None:
+            labels = label_frame(image, camera, design, codes)
+            return k, image, labels.assign(camera=camera.name, frame=k)
+    return None, None, pd.DataFrame(columns=["camera", "frame", *LABEL_COLUMNS])

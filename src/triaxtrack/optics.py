@@ -108,6 +108,34 @@ def normalized_to_pixels(camera: Camera, xy: np.ndarray) -> np.ndarray:
     return uv.reshape(-1, 2)
 
 
+# cv2.undistortPoints iterates a fixed-point scheme; its default (5 iterations) leaves up to
+# ~1 px at the corners of a k1 = -0.3 lens, so iterate to convergence instead (opencv 5 has
+# no undistortPointsIter; undistortPoints takes the criteria)
+UNDISTORT_CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-12)
+UNDISTORT_TOL_PX = 1e-3  # round-trip error above which a point counts as not undistorted
+
+
+def pixels_to_normalized(camera: Camera, uv_px: np.ndarray) -> np.ndarray:
+    """(N, 2) undistorted normalised coordinates (x / z, y / z) of (N, 2) distorted pixels.
+
+    The inverse of :func:`normalized_to_pixels`, checked point by point: where re-distorting
+    the result misses the input by more than ``UNDISTORT_TOL_PX`` (the iteration did not
+    converge, e.g. outside the region where the distortion polynomial is invertible) the row
+    is NaN.
+    """
+    uv = np.asarray(uv_px, np.float64).reshape(-1, 2)
+    if len(uv) == 0:
+        return np.zeros((0, 2))
+    K = np.asarray(camera.K, np.float64)
+    dist = np.asarray(camera.dist, np.float64)
+    xy = cv2.undistortPoints(uv.reshape(-1, 1, 2), K, dist, None, None, None, UNDISTORT_CRITERIA)
+    xy = xy.reshape(-1, 2)
+    back = normalized_to_pixels(camera, xy)
+    miss = ~(np.linalg.norm(back - uv, axis=1) <= UNDISTORT_TOL_PX)
+    xy[miss] = np.nan
+    return xy
+
+
 def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Row-wise dot product of two (N, 3) arrays (einsum: several times faster than sum(axis=1))."""
     return np.einsum("ij,ij->i", a, b)

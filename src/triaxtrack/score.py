@@ -1,20 +1,26 @@
 """Score a results folder against a synthetic test's truth.
 
-``score(results_dir, truth_dir, tolerances)`` compares whatever results exist (cameras now;
-points, IDs and volume as the later stages land) with ``truth/`` and returns a tidy table with
-one row per metric and item: ``metric``, ``item`` (a camera name or 'all'), ``value``,
-``tolerance`` (NaN when only reported), ``unit``, ``passed``.
+``score(results_dir, truth_dir, tolerances)`` compares whatever results exist (the per-camera
+calibrations ``calibration/<camera>.json`` and ``cameras.json`` now; points, IDs and volume as
+the later stages land) with ``truth/`` and returns a tidy table with one row per metric and
+item: ``metric``, ``item`` (a camera name or 'all'), ``value``, ``tolerance`` (NaN when only
+reported), ``unit``, ``passed``, ``source`` (the results file scored).
 """
 
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass, fields
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
-from triaxtrack.optics import Camera, read_cameras
+from triaxtrack.calibrate import read_calibration
+from triaxtrack.optics import Camera, pixels_to_normalized, read_cameras
+
+COLUMNS = ["metric", "item", "value", "tolerance", "unit", "passed", "source"]
+UNDISTORTION_GRID_PX = 8  # spacing of the pixel grid the undistortion maps are compared on
 
 
 @dataclass(frozen=True)
@@ -25,6 +31,12 @@ class ScoreTolerances:
     principal_point_px: float = 1.0
     camera_center_mm: float = 0.5
     camera_rotation_deg: float = 0.05
+    undistortion_px: float = 0.1
+    wrong_id_px: float = 1.0  # a label whose centroid is farther than this from the truth is wrong
+    wrong_ids: float = 0.0
+    coverage: float = 0.95  # minimum share of the targets the truth says a camera sees
+    cell_centroid_median_px: float = 0.05
+    cell_centroid_p95_px: float = 0.15
 
     @staticmethod
     def from_dict(d: dict | None) -> ScoreTolerances:
@@ -39,13 +51,51 @@ def rotation_angle_deg(Ra: np.ndarray, Rb: np.ndarray) -> float:
     return float(np.degrees(np.arccos(np.clip(c, -1.0, 1.0))))
 
 
-def _metric(metric: str, item: str, value: float, tolerance: float = np.nan, unit: str = "") -> dict:
-    """One score row; it passes when within tolerance, or when only reported (no tolerance)."""
-    passed = bool(np.isfinite(value) and (np.isnan(tolerance) or value <= tolerance))
-    return dict(metric=metric, item=item, value=value, tolerance=tolerance, unit=unit, passed=passed)
+def _metric(
+    metric: str,
+    item: str,
+    value: float,
+    tolerance: float = np.nan,
+    unit: str = "",
+    source: str = "",
+    minimum: bool = False,
+) -> dict:
+    """One score row; it passes when within tolerance (at least it, for a ``minimum``), or when
+    only reported (no tolerance)."""
+    within = value >= tolerance if minimum else value <= tolerance
+    passed = bool(np.isfinite(value) and (np.isnan(tolerance) or within))
+    return dict(
+        metric=metric, item=item, value=value, tolerance=tolerance, unit=unit, passed=passed, source=source
+    )
 
 
-def score_cameras(result: dict[str, Camera], truth: dict[str, Camera], tol: ScoreTolerances) -> pd.DataFrame:
+def pixel_grid(width: int, height: int, step_px: int = UNDISTORTION_GRID_PX) -> np.ndarray:
+    """(N, 2) pixel positions every ``step_px`` over the whole image, the last row and column
+    (``width - 1``, ``height - 1``) included."""
+    u = np.unique(np.r_[np.arange(0, width, step_px), width - 1])
+    v = np.unique(np.r_[np.arange(0, height, step_px), height - 1])
+    uu, vv = np.meshgrid(u, v)
+    return np.c_[uu.ravel(), vv.ravel()].astype(np.float64)
+
+
+def undistortion_map_error(est: Camera, truth: Camera, step_px: int = UNDISTORTION_GRID_PX) -> float:
+    """Largest difference, in pixels, between two cameras' undistortion maps over the image.
+
+    For every pixel of :func:`pixel_grid` (the true camera's image), the undistorted normalised
+    coordinates under the estimated and the true K and distortion are compared; the difference
+    is scaled by the true focal lengths (fx for x, fy for y) to pixels. This is the error of the
+    ray direction through each pixel, so focal-length and principal-point errors count in it.
+    ``inf`` where either map cannot be inverted (:func:`triaxtrack.optics.pixels_to_normalized`).
+    """
+    uv = pixel_grid(truth.width, truth.height, step_px)
+    d = (pixels_to_normalized(est, uv) - pixels_to_normalized(truth, uv)) * [truth.K[0, 0], truth.K[1, 1]]
+    err = np.hypot(d[:, 0], d[:, 1])
+    return float(err.max()) if np.isfinite(err).all() else float("inf")
+
+
+def score_cameras(
+    result: dict[str, Camera], truth: dict[str, Camera], tol: ScoreTolerances, source: str = "cameras.json"
+) -> pd.DataFrame:
     """Per-camera intrinsic and pose errors of estimated cameras against the true ones.
 
     A camera whose pose is the identity (intrinsics only, e.g. after calibration) is scored on
@@ -54,20 +104,149 @@ def score_cameras(result: dict[str, Camera], truth: dict[str, Camera], tol: Scor
     rows = []
     for name, cam in sorted(result.items()):
         if name not in truth:
-            rows.append(_metric("camera_unknown", name, np.nan))
+            rows.append(_metric("camera_unknown", name, np.nan, source=source))
             continue
         tr = truth[name]
         f_err = max(abs(cam.K[0, 0] / tr.K[0, 0] - 1), abs(cam.K[1, 1] / tr.K[1, 1] - 1))
         pp = float(np.hypot(cam.K[0, 2] - tr.K[0, 2], cam.K[1, 2] - tr.K[1, 2]))
-        rows.append(_metric("focal_rel_error", name, f_err, tol.focal_rel))
-        rows.append(_metric("principal_point_error", name, pp, tol.principal_point_px, "px"))
+        rows.append(_metric("focal_rel_error", name, f_err, tol.focal_rel, source=source))
+        rows.append(_metric("principal_point_error", name, pp, tol.principal_point_px, "px", source))
         if not (np.allclose(cam.R, np.eye(3)) and np.allclose(cam.t, 0)):
             dc = float(np.linalg.norm(cam.center - tr.center))
-            rows.append(_metric("camera_center_error", name, dc, tol.camera_center_mm, "mm"))
+            rows.append(_metric("camera_center_error", name, dc, tol.camera_center_mm, "mm", source))
             rot = rotation_angle_deg(cam.R, tr.R)
-            rows.append(_metric("camera_rotation_error", name, rot, tol.camera_rotation_deg, "deg"))
-    rows += [_metric("camera_missing", name, np.nan) for name in sorted(set(truth) - set(result))]
-    return pd.DataFrame(rows, columns=["metric", "item", "value", "tolerance", "unit", "passed"])
+            rows.append(_metric("camera_rotation_error", name, rot, tol.camera_rotation_deg, "deg", source))
+    rows += [
+        _metric("camera_missing", name, np.nan, source=source) for name in sorted(set(truth) - set(result))
+    ]
+    return pd.DataFrame(rows, columns=COLUMNS)
+
+
+def score_calibrations(
+    result: dict[str, Camera], truth: dict[str, Camera], tol: ScoreTolerances
+) -> pd.DataFrame:
+    """Per-camera errors of calibrated intrinsics (identity poses) against the true cameras:
+    ``focal_rel_error``, ``principal_point_error`` and ``undistortion_map_error``
+    (:func:`undistortion_map_error`). A calibration whose image size is not the true camera's
+    gets a failing ``image_size_mismatch`` row instead of the map error; cameras missing from,
+    or unknown to, the truth fail."""
+    df = score_cameras(result, truth, tol)
+    df["source"] = "calibration/" + df["item"] + ".json"
+    rows = []
+    for name, cam in sorted(result.items()):
+        if name not in truth:
+            continue
+        tr = truth[name]
+        source = f"calibration/{name}.json"
+        if (cam.width, cam.height) != (tr.width, tr.height):
+            rows.append(_metric("image_size_mismatch", name, np.nan, source=source))
+            continue
+        err = undistortion_map_error(cam, tr)
+        rows.append(_metric("undistortion_map_error", name, err, tol.undistortion_px, "px", source))
+    out = pd.concat([df, pd.DataFrame(rows, columns=COLUMNS)], ignore_index=True)
+    order = {"camera_unknown": 0, "focal_rel_error": 1, "principal_point_error": 2}
+    key = out.metric.map(order).fillna(3)
+    return (
+        out.assign(_k=key)
+        .sort_values(["item", "_k"], kind="stable")
+        .drop(columns="_k")
+        .reset_index(drop=True)
+    )
+
+
+def read_calibrations(folder: str | Path) -> dict[str, Camera]:
+    """The calibrated cameras ``folder/<camera>.json`` (identity pose); ValueError naming a file
+    that is not a calibration result or whose ``camera`` is not its file name. A truth folder's
+    board poses (``truth/calibration/<camera>.json``, key ``board_poses``) are skipped."""
+    cams = {}
+    for path in sorted(Path(folder).glob("*.json")):
+        if _is_board_poses(path):
+            continue
+        cal = read_calibration(path)
+        if cal["camera"] != path.stem:
+            raise ValueError(f"{path}: holds camera {cal['camera']!r}, not {path.stem!r}")
+        cams[path.stem] = Camera(
+            path.stem, int(cal["width"]), int(cal["height"]), np.array(cal["K"], float),
+            np.array(cal["dist"], float), np.eye(3), np.zeros(3),
+        )  # fmt: skip
+    return cams
+
+
+def _is_board_poses(path: Path) -> bool:
+    try:
+        doc = json.loads(path.read_text())
+    except (OSError, ValueError):
+        return False
+    return isinstance(doc, dict) and "board_poses" in doc and "K" not in doc
+
+
+# ---------------------------------------------------------------- identification (issue 3)
+
+
+def true_projections(
+    cam: Camera, ids: np.ndarray, frame: int, points: pd.DataFrame, table: pd.DataFrame, design: dict
+) -> np.ndarray:
+    """(N, 2) exact distorted pixels of targets ``ids`` at ``frame`` in ``cam``, from the truth's
+    3-D points: through the air for cell-wall targets, through both walls for the others."""
+    from triaxtrack.optics import project_air, project_water
+    from triaxtrack.simulate import cell_optics
+
+    pts = points[points.frame == frame].set_index("id").reindex(ids)
+    xyz = pts[["x_mm", "y_mm", "z_mm"]].to_numpy()
+    air = (table.set_index("id").surface.reindex(ids) == "cell_outer").to_numpy()
+    uv = np.full((len(ids), 2), np.nan)
+    ok = np.isfinite(xyz).all(axis=1)
+    if (air & ok).any():
+        uv[air & ok] = project_air(cam, xyz[air & ok])
+    if (~air & ok).any():
+        uv[~air & ok] = project_water(cam, xyz[~air & ok], cell_optics(design))[0]
+    return uv
+
+
+def score_identification(
+    labels: pd.DataFrame,
+    truth_obs: pd.DataFrame,
+    points: pd.DataFrame,
+    cameras: dict[str, Camera],
+    table: pd.DataFrame,
+    design: dict,
+    tol: ScoreTolerances,
+    source: str = "labels.parquet",
+) -> pd.DataFrame:
+    """Per camera and labelled frame: wrong IDs, coverage, cell-wall centroid errors.
+
+    ``labels``: rows ``camera, frame, id, u_px, v_px`` (id -1: unlabelled, ignored). An ID is
+    wrong when its centroid is more than ``tol.wrong_id_px`` from that target's exact projection
+    (from truth observations, or, for a target the truth does not list as seen, from its true 3-D
+    point). Coverage: the share of the targets the truth says the camera sees (whole image in the
+    frame, facing, not hidden) that are labelled. Centroid errors of cell-wall dots (seen in air)
+    against their exact projection: median and 95th percentile over the camera's labelled dots.
+    """
+    rows = []
+    surface = table.set_index("id").surface
+    lab = labels[labels.id > 0]
+    for (cam, frame), got in lab.groupby(["camera", "frame"], sort=True):
+        item = f"{cam}@{frame}"
+        if cam not in cameras:
+            rows.append(_metric("camera_unknown", item, np.nan, source=source))
+            continue
+        seen = truth_obs[(truth_obs.camera == cam) & (truth_obs.frame == frame)].set_index("id")
+        true_uv = seen[["u_px", "v_px"]].reindex(got.id).to_numpy().copy()
+        missing = ~np.isfinite(true_uv).all(axis=1)
+        if missing.any():
+            ids = got.id.to_numpy()[missing]
+            true_uv[missing] = true_projections(cameras[cam], ids, frame, points, table, design)
+        err = np.hypot(got.u_px.to_numpy() - true_uv[:, 0], got.v_px.to_numpy() - true_uv[:, 1])
+        wrong = ~(err <= tol.wrong_id_px)
+        rows.append(_metric("wrong_ids", item, float(wrong.sum()), tol.wrong_ids, "IDs", source))
+        coverage = float(seen.index.isin(got.id).mean()) if len(seen) else np.nan
+        rows.append(_metric("coverage", item, coverage, tol.coverage, "", source, minimum=True))
+        cell = (surface.reindex(got.id) == "cell_outer").to_numpy() & (got.kind == "dot").to_numpy() & ~wrong
+        if cell.any():
+            med, p95 = float(np.median(err[cell])), float(np.quantile(err[cell], 0.95))
+            rows.append(_metric("cell_centroid_median", item, med, tol.cell_centroid_median_px, "px", source))
+            rows.append(_metric("cell_centroid_p95", item, p95, tol.cell_centroid_p95_px, "px", source))
+    return pd.DataFrame(rows, columns=COLUMNS)
 
 
 def score(results_dir: str | Path, truth_dir: str | Path, tol: ScoreTolerances | None = None) -> pd.DataFrame:
@@ -84,27 +263,54 @@ def score(results_dir: str | Path, truth_dir: str | Path, tol: ScoreTolerances |
     if not results_dir.is_dir():
         raise ValueError(f"{results_dir}: no such results folder")
     parts = []
+    truth_cameras = read_cameras(truth_dir / "cameras.json")
+    calibrations = read_calibrations(results_dir / "calibration")
+    if calibrations:
+        parts.append(score_calibrations(calibrations, truth_cameras, tol))
     if (results_dir / "cameras.json").exists():
-        parts.append(
-            score_cameras(
-                read_cameras(results_dir / "cameras.json"), read_cameras(truth_dir / "cameras.json"), tol
-            )
-        )
+        parts.append(score_cameras(read_cameras(results_dir / "cameras.json"), truth_cameras, tol))
+    if (results_dir / "labels.parquet").exists():
+        parts.append(_score_labels(results_dir / "labels.parquet", truth_dir, truth_cameras, tol))
     if not parts:
-        return pd.DataFrame(columns=["metric", "item", "value", "tolerance", "unit", "passed"])
+        return pd.DataFrame(columns=COLUMNS)
     return pd.concat(parts, ignore_index=True)
+
+
+def _score_labels(
+    path: Path, truth_dir: Path, cameras: dict[str, Camera], tol: ScoreTolerances
+) -> pd.DataFrame:
+    """Identification scores of a results folder's labels.parquet (the kit is the test's kit/)."""
+    from triaxtrack.kit import load_kit_design, target_table
+    from triaxtrack.tables import LABELS, OBSERVATIONS, POINTS, read_table
+
+    kit = truth_dir.parent / "kit"
+    if not (kit / "kit.json").exists():
+        raise ValueError(f"{truth_dir}: the test's kit/ (beside truth/) is needed to score labels")
+    design = load_kit_design(kit)
+    return score_identification(
+        read_table(path, LABELS),
+        read_table(truth_dir / "observations.parquet", OBSERVATIONS),
+        read_table(truth_dir / "points.parquet", POINTS),
+        cameras,
+        target_table(design),
+        design,
+        tol,
+        path.name,
+    )
 
 
 def format_table(df: pd.DataFrame) -> str:
     """Human-readable score table."""
     if df.empty:
-        return "nothing to score: the results folder holds none of cameras.json, points, volume"
-    lines = [f"{'metric':<26} {'item':<8} {'value':>12} {'tolerance':>10} {'unit':<4} result"]
+        return (
+            "nothing to score: the results folder holds none of calibration/*.json, cameras.json, "
+            "labels.parquet, points, volume"
+        )
+    lines = [f"{'metric':<26} {'item':<10} {'value':>12} {'tolerance':>10} {'unit':<4} result source"]
     for r in df.itertuples(index=False):
         tol = "" if pd.isna(r.tolerance) else f"{r.tolerance:.4g}"
         val = "missing" if pd.isna(r.value) else f"{r.value:.5g}"
-        lines.append(
-            f"{r.metric:<26} {r.item:<8} {val:>12} {tol:>10} {r.unit:<4} {'ok' if r.passed else 'FAIL'}"
-        )
+        result = "ok  " if r.passed else "FAIL"
+        lines.append(f"{r.metric:<26} {r.item:<10} {val:>12} {tol:>10} {r.unit:<4} {result}   {r.source}")
     lines.append(f"{int(df.passed.sum())} of {len(df)} within tolerance")
     return "\n".join(lines)

@@ -27,7 +27,7 @@ from __future__ import annotations
 import json
 import shutil
 import zlib
-from dataclasses import asdict, dataclass, fields
+from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 
 import cv2
@@ -74,6 +74,20 @@ OCCLUSION_TOL = 0.01  # coverage by a cell band above which a target behind it i
 CHECK_SAMPLE = 300  # dots per surface, camera and frame measured by check_simulation
 SUBROWS_INK = 16  # y sampling of printed ink: keeps rendered centroids exact to < 0.005 px
 SUBROWS_PLAIN = 4  # y sampling of outlines and white labels (no measurement relies on them)
+# calibration-board poses (board_poses). Strong tilts in every direction and boards reaching the
+# image edges and corners pin down the focal length and the distortion out to the corners. On
+# the demo (13 cameras, 1280x720, 15 boards, triaxtrack.calibrate) the undistortion map of the
+# 5-coefficient calibration was off by 0.75 px (median camera) and 2.5 px (worst) with the
+# earlier boards (tilts within +-35 deg about the image axes, kept near the image centre), and is
+# off by 0.26 and 0.85 px with these
+BOARD_TILT_DEG = (30.0, 55.0)  # tilt about an in-plane axis of random direction
+BOARD_ROLL_DEG = 20.0  # in-plane rotation, +-
+BOARD_DISTANCE_MM = (230.0, 420.0)  # board centre from the camera, before it is shifted
+BOARD_MAX_VIEW_DEG = 60.0  # largest angle between the board's normal and the line of sight
+BOARD_EDGE_PX = 12.0  # gap left between the sheet's image and the image edge it is pushed to
+BOARD_SHIFT_STEPS = 4  # shift iterations (the distortion makes one step inexact)
+# where each board goes, in turn: (-1, 0, 1) = left / centre / right, top / centre / bottom
+BOARD_ANCHORS = ((-1, -1), (1, 1), (1, -1), (-1, 1), (0, 0), (0, -1), (1, 0), (0, 1), (-1, 0))
 
 
 @dataclass(frozen=True)
@@ -100,6 +114,10 @@ class SimulationConfig:
     blur_sigma_px: float = 0.0
     calibration_images: int = 15
     min_view_cos: float = 0.3
+    # per camera (by name): test-clock time of its first frame, a whole number of frames >= 0
+    # (the camera started late), and the nominal frame numbers it dropped (triaxtrack.frames)
+    start_offset_s: dict[str, float] = field(default_factory=dict)
+    dropped_frames: dict[str, list[int]] = field(default_factory=dict)
 
     @staticmethod
     def from_dict(d: dict) -> SimulationConfig:
@@ -112,11 +130,45 @@ class SimulationConfig:
             raise ValueError(f"codec must be h264 or h265, not {cfg.codec!r}")
         if cfg.frames < 2 or cfg.cameras < 1:
             raise ValueError("a simulated test needs at least 2 frames and 1 camera")
+        names = set(camera_names(cfg.cameras))
+        for key in ("start_offset_s", "dropped_frames"):
+            unknown_cams = set(getattr(cfg, key)) - names
+            if unknown_cams:
+                raise ValueError(f"{key}: no camera {sorted(unknown_cams)} among cam01..cam{cfg.cameras:02d}")
+        for cam in names:
+            recorded_frames(cfg, cam)  # checks offsets and drops
         return cfg
 
 
 def camera_names(n: int) -> list[str]:
     return [f"cam{i + 1:02d}" for i in range(n)]
+
+
+def recorded_frames(cfg: SimulationConfig, camera: str) -> np.ndarray:
+    """The test frames (sorted int64) that a simulated camera recorded.
+
+    A camera with ``start_offset_s`` = m / fps starts recording at test frame m and records to
+    the end of the test; its nominal frame n (0-based, drops counted) is test frame n + m, and
+    the nominal frames in ``dropped_frames`` are left out. ValueError for an offset that is
+    negative or not a whole number of frames, or drops outside the recording.
+    """
+    offset = float(cfg.start_offset_s.get(camera, 0.0))
+    m = round(offset * cfg.fps)
+    if m < 0 or abs(offset * cfg.fps - m) > 1e-6:
+        raise ValueError(
+            f"start_offset_s of {camera}: {offset} s is not a whole number of frames >= 0 at "
+            f"{cfg.fps} fps (the simulator renders test frames only)"
+        )
+    drops = [int(n) for n in cfg.dropped_frames.get(camera, [])]
+    n_nominal = cfg.frames - m
+    if len(set(drops)) != len(drops) or any(not 0 <= n < n_nominal for n in drops):
+        raise ValueError(
+            f"dropped_frames of {camera}: {drops} must be distinct nominal frames 0..{n_nominal - 1}"
+        )
+    n = np.setdiff1d(np.arange(n_nominal, dtype=np.int64), np.asarray(drops, np.int64))
+    if len(n) == 0:
+        raise ValueError(f"{camera} records no frame (start_offset_s and dropped_frames)")
+    return n + m
 
 
 def look_at(center: np.ndarray, target: np.ndarray) -> np.ndarray:
@@ -245,7 +297,7 @@ def make_scene(cfg: SimulationConfig, kit_dir: str | Path, test_dir: str | Path,
         "name": name,
         "fps": float(cfg.fps),
         "frames": int(cfg.frames),
-        "cameras": [c.name for c in cams],
+        "cameras": [_test_yaml_camera(cfg, c.name) for c in cams],
         "kit": "kit",
         "simulated": True,
     }, sort_keys=False))  # fmt: skip
@@ -261,6 +313,16 @@ def make_scene(cfg: SimulationConfig, kit_dir: str | Path, test_dir: str | Path,
         json.dumps({"cameras": {c.name: c.to_json() for c in cams}}, indent=2)
     )
     write_table(truth_volume(cfg, deformation), test_dir / "truth" / "volume.parquet", VOLUME)
+
+
+def _test_yaml_camera(cfg: SimulationConfig, camera: str) -> str | dict:
+    """A camera's test.yaml entry: its name, or a mapping with its offset and drops if any."""
+    entry: dict = {"name": camera}
+    if camera in cfg.start_offset_s:
+        entry["start_offset_s"] = float(cfg.start_offset_s[camera])
+    if cfg.dropped_frames.get(camera):
+        entry["dropped_frames"] = sorted(int(n) for n in cfg.dropped_frames[camera])
+    return entry if len(entry) > 1 else camera
 
 
 def truth_volume(cfg: SimulationConfig, deformation: Deformation) -> pd.DataFrame:
@@ -552,10 +614,22 @@ def render_chunk(
     video_out: str | Path,
     observations_out: str | Path,
 ) -> None:
-    """Render frames ``[start, stop)`` of one camera: an H.264/H.265 segment and its truth."""
+    """Render test frames ``[start, stop)`` of one camera: an H.264/H.265 segment of the frames
+    the camera recorded (:func:`recorded_frames`) and their truth observations (by test frame).
+
+    Every frame of the range is rendered, recorded or not, so the recorded ones are the very
+    images of a camera without offset or drops. ValueError if the camera recorded none of them
+    (the segment would be empty: use a larger chunk_size or a smaller offset).
+    """
     scene = load_scene(test_dir)
     rend = CameraRenderer(scene, camera)
     cam = scene.cameras[camera]
+    recorded = set(recorded_frames(scene.cfg, camera).tolist())
+    if not recorded & set(range(start, stop)):
+        raise ValueError(
+            f"{camera} recorded none of test frames {start}..{stop - 1} (start_offset_s, dropped_frames): "
+            "a video segment cannot be empty; use a larger chunk_size"
+        )
     obs = []
     Path(video_out).parent.mkdir(parents=True, exist_ok=True)
     with VideoWriter(
@@ -563,8 +637,9 @@ def render_chunk(
     ) as vw:
         for k in range(start, stop):
             img, o = rend.render(k)
-            vw.write(img)
-            obs.append(o)
+            if k in recorded:
+                vw.write(img)
+                obs.append(o)
     write_table(pd.concat(obs, ignore_index=True), observations_out, OBSERVATIONS)
 
 
@@ -572,34 +647,68 @@ def render_chunk(
 def board_poses(
     cfg: SimulationConfig, camera: Camera, board: dict, n: int
 ) -> list[tuple[np.ndarray, np.ndarray]]:
-    """Seeded board poses (R, t board -> camera) filling the image at varied tilts and distances."""
+    """Seeded board poses (R, t board -> camera), strongly tilted and pushed into every part of
+    the image in turn (``BOARD_ANCHORS``), as a careful calibration session would take them.
+
+    Every pose is tilted by ``BOARD_TILT_DEG`` about an in-plane axis of random direction and
+    rolled by up to ``BOARD_ROLL_DEG``; it is then shifted until the board's image touches the
+    image edges on its anchor's sides (``BOARD_EDGE_PX``), so that corners are measured close to
+    the image corners, where the distortion is strongest. The whole sheet stays inside the image.
+    """
     rng = np.random.default_rng([cfg.seed, zlib.crc32(camera.name.encode()), 7])
     sheet, _ = board_polygons_mm(board)
     corners = np.c_[sheet, np.zeros(len(sheet))]
     size = np.ptp(sheet, axis=0)
     centre = np.r_[sheet.min(axis=0) + size / 2, 0]
+    w, h = camera.width, camera.height
+    fx = camera.K[0, 0]
+
+    def image_of(R: np.ndarray, t: np.ndarray) -> np.ndarray:
+        return project_air(Camera("b", w, h, camera.K, camera.dist, R, t), corners)
+
     poses = []
     tries = 0
-    cell_w = 3 if n >= 9 else 2
     while len(poses) < n and tries < 5000:
         tries += 1
-        # spread the board centre over a grid of image regions, then random within
-        k = len(poses)
-        gx, gy = (k % cell_w + rng.uniform()) / cell_w, ((k // cell_w) % cell_w + rng.uniform()) / cell_w
-        dist = rng.uniform(230, 420)
-        rv = np.deg2rad(np.r_[rng.uniform(-35, 35), rng.uniform(-35, 35), rng.uniform(-20, 20)])
-        R = cv2.Rodrigues(rv)[0]
-        fx = camera.K[0, 0]
-        x = (gx - 0.5) * camera.width * 0.8 / fx * dist
-        y = (gy - 0.5) * camera.height * 0.8 / fx * dist
-        t = np.array([x, y, dist]) - R @ centre
-        uv = project_air(Camera("b", camera.width, camera.height, camera.K, camera.dist, R, t), corners)
+        ax, ay = BOARD_ANCHORS[len(poses) % len(BOARD_ANCHORS)]
+        dist = rng.uniform(*BOARD_DISTANCE_MM)
+        azimuth = rng.uniform(0, 2 * np.pi)
+        tilt = np.deg2rad(rng.uniform(*BOARD_TILT_DEG))
+        roll = np.deg2rad(rng.uniform(-1, 1) * BOARD_ROLL_DEG)
+        R = (
+            cv2.Rodrigues(tilt * np.r_[np.cos(azimuth), np.sin(azimuth), 0])[0]
+            @ cv2.Rodrigues(np.r_[0, 0, roll])[0]
+        )
+        t = np.r_[0.0, 0.0, dist] - R @ centre
+        for _ in range(BOARD_SHIFT_STEPS):
+            uv = image_of(R, t)
+            if not np.isfinite(uv).all():
+                break
+            lo, hi = uv.min(axis=0), uv.max(axis=0)
+            jitter = rng.uniform(0, 3, 2)
+            du = (
+                BOARD_EDGE_PX + jitter[0] - lo[0],
+                (w - 1 - lo[0] - hi[0]) / 2,
+                w - 1 - BOARD_EDGE_PX - jitter[0] - hi[0],
+            )[ax + 1]
+            dv = (
+                BOARD_EDGE_PX + jitter[1] - lo[1],
+                (h - 1 - lo[1] - hi[1]) / 2,
+                h - 1 - BOARD_EDGE_PX - jitter[1] - hi[1],
+            )[ay + 1]
+            # pixels to mm at the board centre's depth; 0.9 damps the step (distortion)
+            t = t + 0.9 * np.r_[du, dv, 0.0] * dist / fx
+        uv = image_of(R, t)
         pc = corners @ R.T + t
+        to_board = R @ centre + t
+        cos_view = abs(R[:, 2] @ to_board) / np.linalg.norm(to_board)
         if (
             (pc[:, 2] > 50).all()
+            and cos_view >= np.cos(np.deg2rad(BOARD_MAX_VIEW_DEG))
+            and np.isfinite(uv).all()
             and (uv >= 10).all()
-            and (uv[:, 0] <= camera.width - 11).all()
-            and (uv[:, 1] <= camera.height - 11).all()
+            and (uv[:, 0] <= w - 11).all()
+            and (uv[:, 1] <= h - 11).all()
         ):
             poses.append((R, t))
     if len(poses) < n:
@@ -730,14 +839,16 @@ def centroid_errors(
 def check_simulation(test_dir: str | Path, out_json: str | Path | None = None) -> dict:
     """Measure a simulated test against its own truth; optionally write the figures as JSON.
 
-    For the first and last frame of every camera, decoded from the video: the contrast-weighted
-    centroid of the dots the truth says the camera sees (a seeded sample of ``CHECK_SAMPLE`` per
-    surface), against the exact image of the dot's
-    centre. Cell-wall dots are seen in air; membrane dots through both walls and the water.
-    Also checks frame counts and calibration images. ``ok`` is true when every video has all
-    its frames and the median errors are within 0.10 px (air) and 0.15 px (water).
+    For the first and last test frame every camera recorded, decoded from its video through the
+    frame map (:mod:`triaxtrack.frames`, so start offsets and dropped frames are honoured): the
+    contrast-weighted centroid of the dots the truth says the camera sees (a seeded sample of
+    ``CHECK_SAMPLE`` per surface), against the exact image of the dot's centre. Cell-wall dots
+    are seen in air; membrane dots through both walls and the water. Also checks frame counts
+    and calibration images. ``ok`` is true when every video has the frames its camera recorded
+    and the median errors are within 0.10 px (air) and 0.15 px (water).
     """
-    from triaxtrack.video import probe_video, read_frame
+    from triaxtrack.frames import frame_map, read_camera_timing, read_test_frame
+    from triaxtrack.video import probe_video
 
     test_dir = Path(test_dir)
     scene_cfg = SimulationConfig.from_dict(
@@ -747,16 +858,26 @@ def check_simulation(test_dir: str | Path, out_json: str | Path | None = None) -
     truth_obs = read_table(test_dir / "truth" / "observations.parquet", OBSERVATIONS)
     targets = pd.read_csv(test_dir / "kit" / "targets.csv").set_index("id")
     rows, per_camera = [], {}
-    for cam in meta["cameras"]:
+    for entry in meta["cameras"]:
+        cam = entry["name"] if isinstance(entry, dict) else entry
         video = test_dir / "videos" / f"{cam}.mp4"
         info = probe_video(video)
         n_cal = len(list((test_dir / "calibration" / cam).glob("*.png")))
-        for frame in sorted({0, scene_cfg.frames - 1}):
+        recorded = recorded_frames(scene_cfg, cam)
+        fmap = frame_map(read_camera_timing(test_dir / "test.yaml", cam), scene_cfg.frames, info["frames"])
+        for frame in sorted({int(recorded[0]), int(recorded[-1])}):
+            image = read_test_frame(video, fmap, frame)
+            if image is None:
+                continue  # the video is short: counted below
             sel = truth_obs[(truth_obs.camera == cam) & (truth_obs.frame == frame)]
-            e = centroid_errors(sel, targets, read_frame(video, frame), CHECK_SAMPLE)
+            e = centroid_errors(sel, targets, image, CHECK_SAMPLE)
             e["camera"], e["frame"] = cam, frame
             rows.append(e)
-        per_camera[cam] = {"frames": info["frames"], "calibration_images": n_cal}
+        per_camera[cam] = {
+            "frames": info["frames"],
+            "frames_expected": len(recorded),
+            "calibration_images": n_cal,
+        }
     err = pd.concat(rows, ignore_index=True)
 
     def stats(sel: pd.DataFrame) -> dict:
@@ -776,7 +897,7 @@ def check_simulation(test_dir: str | Path, out_json: str | Path | None = None) -
         sel = err[err.camera == cam]
         per_camera[cam]["air_median_px"] = stats(sel[sel.surface == "cell_outer"])["median_px"]
         per_camera[cam]["water_median_px"] = stats(sel[sel.surface == "membrane"])["median_px"]
-    frames_ok = all(c["frames"] == scene_cfg.frames for c in per_camera.values())
+    frames_ok = all(c["frames"] == c["frames_expected"] for c in per_camera.values())
     ok = bool(frames_ok and air["median_px"] is not None and air["median_px"] <= 0.10
               and water["median_px"] is not None and water["median_px"] <= 0.15)  # fmt: skip
     report = {"test": meta["name"], "ok": ok, "frames_expected": scene_cfg.frames, "air_dots": air,

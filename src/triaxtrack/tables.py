@@ -43,6 +43,17 @@ VOLUME = Schema(
     ("frame",),
 )  # fmt: skip
 
+FRAME_MAP = Schema(
+    "frame_map",
+    {"frame": "int64", "time_s": "float64", "video_index": "int64", "missing": "bool", "reason": "object",
+     "video_time_s": "float64"},
+    ("frame",),
+)  # fmt: skip
+"""One camera's frame map (``triaxtrack.frames``): test frame k at ``time_s = k / fps``;
+``video_index`` the 0-based index in the camera's video file (-1 when ``missing``); ``reason``
+``before_start``, ``dropped``, ``after_end`` or ''; ``video_time_s`` the test-clock time the
+video frame was taken (NaN when missing)."""
+
 
 def conform(df: pd.DataFrame, schema: Schema, source: str = "table") -> pd.DataFrame:
     """A copy of ``df`` with exactly the schema's leading columns and dtypes, sorted by its key.
@@ -84,3 +95,27 @@ def read_table(path: str | Path, schema: Schema) -> pd.DataFrame:
     except (OSError, ValueError) as err:
         raise ValueError(f"{path}: cannot read {schema.name} table: {err}") from err
     return conform(df, schema, str(path))
+
+
+LABELS = Schema(
+    "labels",
+    {"camera": "object", "frame": "int64", "id": "int64", "kind": "object", "group": "object",
+     "u_px": "float64", "v_px": "float64", "u_undist_px": "float64", "v_undist_px": "float64",
+     "area_px": "float64", "roundness": "float64", "quality": "float64", "reason": "object"},
+    ("camera", "frame", "id", "v_px", "u_px"),
+)  # fmt: skip
+"""Targets detected in one camera frame (``triaxtrack.identify``): ``id`` the Table 1 ID, -1
+where not labelled (``reason`` says why); ``kind`` 'coded' or 'dot'; ``group`` the stripe or
+membrane region; ``u_px, v_px`` the distorted centroid and ``u_undist_px, v_undist_px`` the same
+point undistorted (ideal pinhole pixels of the calibrated K), pixel centres at integers;
+``area_px`` the binarised blob's area; ``roundness`` its minor over major axis; ``quality`` 0-1
+(CTs: the weakest code sector's contrast; dots: 1 for the Eq. 1 dots and stripe ends found from
+a CT, 0.9 for dots found by interpolation or the grid walk)."""
+
+
+def concat_tables(paths: list[str | Path], schema: Schema) -> pd.DataFrame:
+    """Several tables of one schema, read and checked, as one (sorted by the schema's key)."""
+    parts = [read_table(p, schema) for p in paths]
+    if not parts:
+        raise ValueError(f"no {schema.name} tables to join")
+    return conform(pd.concat(parts, ignore_index=True), schema, f"{len(parts)} {schema.name} tables")

@@ -272,12 +272,81 @@ def get_inventory_probes(wildcards):
     )
 
 
+# ---------------------------------------------------------------- input functions: any test
+
+
+def _check_camera(wildcards):
+    if wildcards.camera not in get_cameras(wildcards.test):
+        raise WorkflowError(
+            f"test {wildcards.test!r} has no camera {wildcards.camera!r}; "
+            f"cameras: {get_cameras(wildcards.test)}"
+        )
+
+
+def get_test_yaml(wildcards):
+    """TEST_DIR/test.yaml of any test (simulated: written by simulate_scene)."""
+    return str(Path(get_test_dir(wildcards.test)) / "test.yaml")
+
+
+def get_test_kit(wildcards):
+    """The kit folder of any test: the simulated test's kit/, or test.yaml's `kit`."""
+    spec = _spec(wildcards.test)
+    if "simulate" in spec:
+        return str(Path(get_test_dir(wildcards.test)) / "kit")
+    return str(Path(get_test_dir(wildcards.test)) / spec["recorded"]["kit"])
+
+
+def get_calibration_folder(wildcards):
+    """TEST_DIR/calibration/<camera>: the camera's board images."""
+    _check_camera(wildcards)
+    return str(Path(get_test_dir(wildcards.test)) / "calibration" / wildcards.camera)
+
+
+def get_calibration_images(wildcards):
+    """The camera's board images: the folder rendered by render_calibration (simulated), or
+    the *.png files in it (recorded; none if it is missing: calibrate_camera then says so).
+    """
+    folder = get_calibration_folder(wildcards)
+    if "simulate" in _spec(wildcards.test):
+        return folder
+    return sorted(str(p) for p in Path(folder).glob("*.png"))
+
+
+def get_camera_video(wildcards):
+    """TEST_DIR/videos/<camera>.mp4 of any test."""
+    _check_camera(wildcards)
+    return str(
+        Path(get_test_dir(wildcards.test)) / "videos" / f"{wildcards.camera}.mp4"
+    )
+
+
+def get_frame_count_video(wildcards):
+    """The video whose frame count is the test's when test.yaml gives no `frames` (a recorded
+    test: its first camera's, as get_frames); none otherwise. Read when the job runs, so that a
+    dry run needs no readable video."""
+    spec = _spec(wildcards.test)
+    if "recorded" in spec and "frames" not in spec["recorded"]:
+        return _recorded_video(wildcards.test, get_cameras(wildcards.test)[0])
+    return []
+
+
 # ---------------------------------------------------------------- targets
+
+
+def get_chunk_labels(wildcards):
+    """The identification tables of every camera and chunk of a test."""
+    return expand(
+        "results/{test}/identify/{camera}/{chunk}.parquet",
+        test=wildcards.test,
+        camera=get_cameras(wildcards.test),
+        chunk=get_chunks(wildcards.test),
+    )
 
 
 def get_final_outputs():
     """Everything the default target builds: the kit; per simulated test its test folder and
-    simulation_check.json; per recorded test its inventory.json."""
+    simulation_check.json; per recorded test its inventory.json; per test and camera its
+    calibration and frame map; per test the labels of every camera's chunk starts."""
     outputs = [KIT_DIR]
     for test in SIMULATED:
         outputs += expand(
@@ -304,4 +373,14 @@ def get_final_outputs():
         )
     for test in RECORDED:
         outputs += expand("results/{test}/inventory.json", test=test)
+    for test in TESTS:
+        outputs += expand(
+            [
+                "results/{test}/calibration/{camera}.json",
+                "results/{test}/frames/{camera}.parquet",
+            ],
+            test=test,
+            camera=get_cameras(test),
+        )
+        outputs.append(f"results/{test}/labels.parquet")
     return outputs
