@@ -217,20 +217,11 @@ class CodeBook:
     def nearest(self, word: int) -> tuple[int, int, int, int]:
         """(id, distance, rotated word matched, distance to the nearest *other* id)."""
         x = np.bitwise_xor(self.words, np.int64(word))
-        d = np.array([bin(int(v)).count("1") for v in x]) if len(x) < 64 else _popcount(x)
+        d = np.bitwise_count(x)
         i = int(np.argmin(d))
         best_id = int(self.ids[i])
         other = d[self.ids != best_id]
         return best_id, int(d[i]), int(self.words[i]), int(other.min()) if len(other) else 99
-
-
-def _popcount(x: np.ndarray) -> np.ndarray:
-    x = x.astype(np.uint64)
-    c = np.zeros(len(x), np.int64)
-    while np.any(x):
-        c += (x & np.uint64(1)).astype(np.int64)
-        x >>= np.uint64(1)
-    return c
 
 
 def _ct_geometry(ct: dict) -> dict[str, float]:

@@ -36,6 +36,7 @@ import pandas as pd
 from scipy.spatial import cKDTree
 
 from triaxtrack.detect import ellipse_maps
+from triaxtrack.kit import eq1_dot_id
 
 UNLABELLED = -1
 FAR_PX = 1e9
@@ -141,7 +142,7 @@ def grow_chain(
         return pos[labels[key(i)]]
 
     while True:
-        proposals: dict[int, tuple[int, float]] = {}
+        proposals: dict[int, int] = {}
         for i in range(n):
             if i in labels:
                 continue
@@ -173,13 +174,13 @@ def grow_chain(
                 continue
             j = pool.unique_within(pred, gate * spacing)
             if j >= 0:
-                if any(v[0] == j for v in proposals.values()):
-                    proposals = {k: v for k, v in proposals.items() if v[0] != j}
+                if j in proposals.values():  # two indices want one dot: neither gets it
+                    proposals = {k: v for k, v in proposals.items() if v != j}
                     continue
-                proposals[i] = (j, float(np.linalg.norm(pos[j] - pred) / (gate * spacing)))
+                proposals[i] = j
         if not proposals:
             return labels
-        for i, (j, _) in proposals.items():
+        for i, j in proposals.items():
             labels[i] = j
             pool.free[j] = False
 
@@ -404,8 +405,6 @@ def _label_longitudinal(f: _Frame, pool: _Pool, centres: dict, design: dict, p: 
     offset = cell["dot_offset"]
     zt, zb = cell["longitudinal_z_top"], cell["longitudinal_z_bottom"]
     labelled = {int(t): k for k, t in enumerate(f.ids) if t != UNLABELLED}
-    from triaxtrack.kit import eq1_dot_id
-
     top, bottom = cell["ct_stripes"][0], cell["ct_stripes"][-1]
     for ls in cell["longitudinal_stripes"]:
         n = ls["count"]
@@ -554,13 +553,24 @@ class _MembraneView:
         )
 
 
+def _grow_region(pool: _Pool, start: int, down: np.ndarray, gate: float) -> list[dict]:
+    """The grid region grown from a free dot (taking its dots from the pool), or none."""
+    if not pool.free[start]:
+        return []
+    seed = _seed_grid(pool, start, down, gate)
+    if seed is None:
+        return []
+    pool.free[list(seed.values())] = False
+    return [grow_grid(pool, seed, gate)]
+
+
 def _label_membrane(f: _Frame, pool: _Pool, centres: dict, design: dict, p: IdentifyParams) -> None:
     rc = design["coded_target"]["centre_radius"]
     anchors = _pedestal_anchors(centres, design)
     axis = _axis_down(anchors)
     area = f.blobs.area_px.to_numpy()
-    owner = np.full(len(f.pos), -1)
     regions = []
+    z_from_face = design["pedestal_targets"]["stripes"][0]["z_from_face"]
     for an in anchors:
         if an.top is not None and an.bottom is not None:
             down = an.bottom[0] - an.top[0]
@@ -571,20 +581,10 @@ def _label_membrane(f: _Frame, pool: _Pool, centres: dict, design: dict, p: Iden
             sign = 1.0 if an.top is not None else -1.0
             down = axis
             # a point on the membrane a quarter of its height from the CT's pedestal face
-            depth_mm = design["specimen"]["height"] / 4 + 12.5
+            depth_mm = design["specimen"]["height"] / 4 + z_from_face
             start_at = centre + sign * down * depth_mm * ellipse_radius(mp[None], down[None])[0] / rc
         _, start = pool.tree.query(start_at)
-        if owner[start] >= 0 or not pool.free[start]:
-            continue
-        seed = _seed_grid(pool, int(start), down, p.gate)
-        if seed is None:
-            continue
-        for k in seed.values():
-            pool.free[k] = False
-        grid = grow_grid(pool, seed, p.gate)
-        for k in grid.values():
-            owner[k] = len(regions)
-        regions.append(grid)
+        regions += _grow_region(pool, int(start), down, p.gate)
     # then the dots no pedestal CT led to (beyond a longitudinal stripe's band): their regions
     # are fixed across the band below
     tops = [a.top[0] @ axis for a in anchors if a.top is not None]
@@ -592,14 +592,7 @@ def _label_membrane(f: _Frame, pool: _Pool, centres: dict, design: dict, p: Iden
     if tops and bottoms:
         s = f.pos @ axis
         for k in np.nonzero(pool.free & (s > np.mean(tops)) & (s < np.mean(bottoms)))[0]:
-            if not pool.free[k]:
-                continue
-            seed = _seed_grid(pool, int(k), axis, p.gate)
-            if seed is None:
-                continue
-            for j in seed.values():
-                pool.free[j] = False
-            regions.append(grow_grid(pool, seed, p.gate))
+            regions += _grow_region(pool, int(k), axis, p.gate)
     ctx = _MembraneView.of(regions, anchors, axis, f.pos, design)
     phases = [_grid_phase(g, area, p) if len(g) >= p.min_region_dots else None for g in regions]
     fixed: dict[int, tuple[int, int]] = {}
