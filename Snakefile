@@ -21,6 +21,7 @@ include: "workflow/rules/simulate.smk"
 include: "workflow/rules/calibrate.smk"
 include: "workflow/rules/frames.smk"
 include: "workflow/rules/identify.smk"
+include: "workflow/rules/reconstruct.smk"
 include: "workflow/rules/inventory.smk"
 
 

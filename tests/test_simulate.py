@@ -120,8 +120,8 @@ def test_observations_are_deterministic(small_test):
 def test_small_membrane_dot_is_at_least_6_px_at_1080p(design):
     """Default cameras at 1920x1080: a small membrane dot facing a camera spans >= 6 px."""
     from triaxtrack.kit import _disc
-    from triaxtrack.optics import project_water
-    from triaxtrack.simulate import cell_optics, make_cameras
+    from triaxtrack.optics import cell_optics, project_water
+    from triaxtrack.simulate import make_cameras
 
     cam = make_cameras(SimulationConfig(width=1920, height=1080))[0]
     theta = np.arctan2(cam.center[1], cam.center[0])

@@ -44,6 +44,7 @@ import cv2
 import numpy as np
 
 from triaxtrack.kit import board_corners_mm
+from triaxtrack.optics import Camera
 
 #: calibration models: name -> (cv2.calibrateCamera flags, number of distortion coefficients)
 MODELS: dict[str, tuple[int, int]] = {
@@ -386,6 +387,12 @@ def read_calibration(path: str | Path) -> dict:
     except (OSError, ValueError, TypeError) as err:
         raise ValueError(f"{path}: not a calibration result: {err}") from err
     return cal
+
+
+def calibrated_camera(cal: dict) -> Camera:
+    """The :class:`~triaxtrack.optics.Camera` of a calibration result: its intrinsics and
+    distortion, with the identity pose (the pose is found later, by :mod:`triaxtrack.sfm`)."""
+    return Camera.from_json(str(cal["camera"]), {**cal, "R": np.eye(3), "t": np.zeros(3)})
 
 
 def format_calibration(result: dict) -> str:

@@ -183,6 +183,21 @@ def target_table(design: dict) -> pd.DataFrame:
     return df
 
 
+def design_points(design: dict, table: pd.DataFrame) -> pd.DataFrame:
+    """Design 3-D centre of every target, undeformed: columns ``id, x_mm, y_mm, z_mm`` (cell
+    frame, mm), each target on its surface's cylinder (:func:`surfaces`) at its ``theta_rad`` and
+    ``z_mm``. The membrane's are on the printed surface before loading."""
+    radius = {s["name"]: s["radius"] for s in surfaces(design)}
+    r = table["surface"].map(radius).to_numpy(float)
+    th = table["theta_rad"].to_numpy(float)
+    return pd.DataFrame({
+        "id": table["id"].to_numpy(np.int64),
+        "x_mm": r * np.cos(th),
+        "y_mm": r * np.sin(th),
+        "z_mm": table["z_mm"].to_numpy(float),
+    })  # fmt: skip
+
+
 def membrane_id(r: int, c: int, membrane: dict) -> int:
     """Eq. 4: ID of the membrane dot in row r, column c (1-based)."""
     return (r - 1) * membrane["columns"] + c + membrane["first_id"] - 1

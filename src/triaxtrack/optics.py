@@ -52,6 +52,16 @@ class Camera:
             "t": np.asarray(self.t, float).reshape(3).tolist(),
         }
 
+    def transformed(self, scale: float, rotation: np.ndarray, translation: np.ndarray) -> Camera:
+        """The same camera after the world moves by the similarity ``x' = s A x + b``.
+
+        Its image of every point is unchanged: ``R' = R A^T`` and ``t' = s t - R' b`` (the camera
+        frame is scaled by ``s`` with the world, so ``t`` stays in the new world's units)."""
+        A = np.asarray(rotation, float)
+        R = self.R @ A.T
+        t = scale * self.t - R @ np.asarray(translation, float).reshape(3)
+        return Camera(self.name, self.width, self.height, self.K, self.dist, R, t)
+
     @staticmethod
     def from_json(name: str, d: dict) -> Camera:
         return Camera(
@@ -86,6 +96,29 @@ class CellOptics:
     z_min: float = -np.inf
     z_max: float = np.inf
     n_air: float = field(default=1.0)
+
+
+def cell_optics(
+    design: dict,
+    outer_radius: float | None = None,
+    wall_thickness_mm: float | None = None,
+    n_acrylic: float | None = None,
+    n_water: float | None = None,
+) -> CellOptics:
+    """The cell of a kit design (``kit.json``: ``cell`` radii, height and acrylic index, ``water``
+    index), each value replaced by the argument given for it (``None``: the design's). The inner
+    radius is ``outer_radius - wall_thickness_mm``."""
+    c = design["cell"]
+    outer = c["outer_radius"] if outer_radius is None else outer_radius
+    wall = c["outer_radius"] - c["inner_radius"] if wall_thickness_mm is None else wall_thickness_mm
+    return CellOptics(
+        outer_radius=float(outer),
+        inner_radius=float(outer - wall),
+        n_acrylic=float(c["refractive_index"] if n_acrylic is None else n_acrylic),
+        n_water=float(design["water"]["refractive_index"] if n_water is None else n_water),
+        z_min=c["z_min"],
+        z_max=c["z_max"],
+    )
 
 
 def project_air(camera: Camera, points_mm: np.ndarray) -> np.ndarray:

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from triaxtrack.calibrate import read_calibration
+from triaxtrack.calibrate import calibrated_camera, read_calibration
 from triaxtrack.optics import Camera, pixels_to_normalized, read_cameras
 
 COLUMNS = ["metric", "item", "value", "tolerance", "unit", "passed", "source"]
@@ -37,6 +37,9 @@ class ScoreTolerances:
     coverage: float = 0.95  # minimum share of the targets the truth says a camera sees
     cell_centroid_median_px: float = 0.05
     cell_centroid_p95_px: float = 0.15
+    mean_reprojection_px: float = 0.3  # reconstruction (quality.json), all cameras and per camera
+    membrane_rms_mm: float = 0.05  # 3-D error of the membrane dots against the truth
+    membrane_3_rays: float = 0.9  # minimum share of the membrane dots reconstructed from 3+ rays
 
     @staticmethod
     def from_dict(d: dict | None) -> ScoreTolerances:
@@ -165,10 +168,7 @@ def read_calibrations(folder: str | Path) -> dict[str, Camera]:
         cal = read_calibration(path)
         if cal["camera"] != path.stem:
             raise ValueError(f"{path}: holds camera {cal['camera']!r}, not {path.stem!r}")
-        cams[path.stem] = Camera(
-            path.stem, int(cal["width"]), int(cal["height"]), np.array(cal["K"], float),
-            np.array(cal["dist"], float), np.eye(3), np.zeros(3),
-        )  # fmt: skip
+        cams[path.stem] = calibrated_camera(cal)
     return cams
 
 
@@ -188,8 +188,7 @@ def true_projections(
 ) -> np.ndarray:
     """(N, 2) exact distorted pixels of targets ``ids`` at ``frame`` in ``cam``, from the truth's
     3-D points: through the air for cell-wall targets, through both walls for the others."""
-    from triaxtrack.optics import project_air, project_water
-    from triaxtrack.simulate import cell_optics
+    from triaxtrack.optics import cell_optics, project_air, project_water
 
     pts = points[points.frame == frame].set_index("id").reindex(ids)
     xyz = pts[["x_mm", "y_mm", "z_mm"]].to_numpy()
@@ -249,6 +248,55 @@ def score_identification(
     return pd.DataFrame(rows, columns=COLUMNS)
 
 
+# ---------------------------------------------------------------- reconstruction (issue 4)
+
+
+def score_points(
+    points: pd.DataFrame,
+    truth: pd.DataFrame,
+    table: pd.DataFrame,
+    tol: ScoreTolerances,
+    source: str = "points.parquet",
+) -> pd.DataFrame:
+    """Per reconstructed frame (item ``all@<frame>``): RMS 3-D error against the truth of the
+    membrane dots (``membrane_rms_error``), of the pedestal CTs and of the cell-wall targets
+    (reported), and the share of the design's membrane dots reconstructed from 3 or more rays
+    (``membrane_3_rays``). ``points``, ``truth``: POINTS tables; ``table``: the kit's targets."""
+    rows = []
+    surface = table.set_index("id")["surface"]
+    n_membrane = int((surface == "membrane").sum())
+    for frame, got in points.groupby("frame", sort=True):
+        item = f"all@{frame}"
+        tru = truth[truth["frame"] == frame].set_index("id")[["x_mm", "y_mm", "z_mm"]]
+        known = got["id"].isin(tru.index).to_numpy()
+        err = np.full(len(got), np.nan)
+        d = got[["x_mm", "y_mm", "z_mm"]].to_numpy()[known] - tru.loc[got["id"][known]].to_numpy()
+        err[known] = np.sqrt((d**2).sum(axis=1))
+        where = surface.reindex(got["id"]).to_numpy()
+        for name, surf, limit in (
+            ("membrane_rms_error", ["membrane"], tol.membrane_rms_mm),
+            ("pedestal_rms_error", ["pedestal_bottom", "pedestal_top"], np.nan),
+            ("cell_wall_rms_error", ["cell_outer"], np.nan),
+        ):
+            sel = np.isin(where, surf) & np.isfinite(err)
+            if sel.any():
+                rows.append(_metric(name, item, float(np.sqrt(np.mean(err[sel] ** 2))), limit, "mm", source))
+        share = float(((where == "membrane") & (got["n_rays"].to_numpy() >= 3)).sum() / max(n_membrane, 1))
+        rows.append(_metric("membrane_3_rays", item, share, tol.membrane_3_rays, "", source, minimum=True))
+    return pd.DataFrame(rows, columns=COLUMNS)
+
+
+def score_quality(quality: dict, tol: ScoreTolerances, source: str = "quality.json") -> pd.DataFrame:
+    """The mean reprojection error of the reconstruction, over all cameras and per camera."""
+    values = {"all": quality["mean_reprojection_px"]}
+    values |= {name: q["mean_reprojection_px"] for name, q in sorted(quality.get("per_camera", {}).items())}
+    rows = [
+        _metric("mean_reprojection", item, float(v), tol.mean_reprojection_px, "px", source)
+        for item, v in values.items()
+    ]
+    return pd.DataFrame(rows, columns=COLUMNS)
+
+
 def score(results_dir: str | Path, truth_dir: str | Path, tol: ScoreTolerances | None = None) -> pd.DataFrame:
     """Every metric that the results present in ``results_dir`` allow, against ``truth_dir``.
 
@@ -271,6 +319,10 @@ def score(results_dir: str | Path, truth_dir: str | Path, tol: ScoreTolerances |
         parts.append(score_cameras(read_cameras(results_dir / "cameras.json"), truth_cameras, tol))
     if (results_dir / "labels.parquet").exists():
         parts.append(_score_labels(results_dir / "labels.parquet", truth_dir, truth_cameras, tol))
+    if (results_dir / "quality.json").exists():
+        parts.append(score_quality(json.loads((results_dir / "quality.json").read_text()), tol))
+    if (results_dir / "points.parquet").exists():
+        parts.append(_score_points(results_dir / "points.parquet", truth_dir, tol))
     if not parts:
         return pd.DataFrame(columns=COLUMNS)
     return pd.concat(parts, ignore_index=True)
@@ -280,13 +332,10 @@ def _score_labels(
     path: Path, truth_dir: Path, cameras: dict[str, Camera], tol: ScoreTolerances
 ) -> pd.DataFrame:
     """Identification scores of a results folder's labels.parquet (the kit is the test's kit/)."""
-    from triaxtrack.kit import load_kit_design, target_table
+    from triaxtrack.kit import target_table
     from triaxtrack.tables import LABELS, OBSERVATIONS, POINTS, read_table
 
-    kit = truth_dir.parent / "kit"
-    if not (kit / "kit.json").exists():
-        raise ValueError(f"{truth_dir}: the test's kit/ (beside truth/) is needed to score labels")
-    design = load_kit_design(kit)
+    design = _test_kit(truth_dir)
     return score_identification(
         read_table(path, LABELS),
         read_table(truth_dir / "observations.parquet", OBSERVATIONS),
@@ -299,12 +348,32 @@ def _score_labels(
     )
 
 
+def _test_kit(truth_dir: Path) -> dict:
+    """The design of a test's kit/ (beside truth/)."""
+    from triaxtrack.kit import load_kit_design
+
+    kit = truth_dir.parent / "kit"
+    if not (kit / "kit.json").exists():
+        raise ValueError(f"{truth_dir}: the test's kit/ (beside truth/) is needed to score targets")
+    return load_kit_design(kit)
+
+
+def _score_points(path: Path, truth_dir: Path, tol: ScoreTolerances) -> pd.DataFrame:
+    """Reconstruction scores of a results folder's points.parquet."""
+    from triaxtrack.kit import target_table
+    from triaxtrack.tables import POINTS, read_table
+
+    table = target_table(_test_kit(truth_dir))
+    truth = read_table(truth_dir / "points.parquet", POINTS)
+    return score_points(read_table(path, POINTS), truth, table, tol, path.name)
+
+
 def format_table(df: pd.DataFrame) -> str:
     """Human-readable score table."""
     if df.empty:
         return (
             "nothing to score: the results folder holds none of calibration/*.json, cameras.json, "
-            "labels.parquet, points, volume"
+            "labels.parquet, quality.json, points.parquet"
         )
     lines = [f"{'metric':<26} {'item':<10} {'value':>12} {'tolerance':>10} {'unit':<4} result source"]
     for r in df.itertuples(index=False):

@@ -46,7 +46,7 @@ from triaxtrack.kit import (
     surface_by_name,
     target_table,
 )
-from triaxtrack.optics import Camera, CellOptics, project_air, project_water, read_cameras
+from triaxtrack.optics import Camera, CellOptics, cell_optics, project_air, project_water, read_cameras
 from triaxtrack.raster import paint_into
 from triaxtrack.tables import OBSERVATIONS, POINTS, VOLUME, read_table, write_table
 from triaxtrack.video import VideoWriter
@@ -224,18 +224,6 @@ def deformation_for(cfg: SimulationConfig, design: dict) -> Deformation:
 def progress(frame: int, frames: int) -> float:
     """Loading progress of a frame: 0 at the first, 1 at the last (constant strain rate)."""
     return frame / (frames - 1)
-
-
-def cell_optics(design: dict) -> CellOptics:
-    c = design["cell"]
-    return CellOptics(
-        outer_radius=c["outer_radius"],
-        inner_radius=c["inner_radius"],
-        n_acrylic=c["refractive_index"],
-        n_water=design["water"]["refractive_index"],
-        z_min=c["z_min"],
-        z_max=c["z_max"],
-    )
 
 
 # ---------------------------------------------------------------- the scene

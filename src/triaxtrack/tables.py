@@ -119,3 +119,15 @@ def concat_tables(paths: list[str | Path], schema: Schema) -> pd.DataFrame:
     if not parts:
         raise ValueError(f"no {schema.name} tables to join")
     return conform(pd.concat(parts, ignore_index=True), schema, f"{len(parts)} {schema.name} tables")
+
+
+RESIDUALS = Schema(
+    "residuals",
+    {"camera": "object", "frame": "int64", "id": "int64", "u_px": "float64", "v_px": "float64",
+     "du_px": "float64", "dv_px": "float64", "used": "bool", "reason": "object"},
+    ("camera", "frame", "id"),
+)  # fmt: skip
+"""Every observation offered to a reconstruction (``triaxtrack.sfm``: cell-wall targets in air;
+``triaxtrack.triangulate``: targets in the water): ``u_px, v_px`` the labelled distorted pixel,
+``du_px, dv_px`` the reprojection of the reconstructed point minus it (NaN where there is no
+point), ``used`` whether it entered the solution, ``reason`` why not ('' when used)."""

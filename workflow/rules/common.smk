@@ -333,6 +333,15 @@ def get_frame_count_video(wildcards):
 # ---------------------------------------------------------------- targets
 
 
+def get_calibrations(wildcards):
+    """The calibration result of every camera of a test."""
+    return expand(
+        "results/{test}/calibration/{camera}.json",
+        test=wildcards.test,
+        camera=get_cameras(wildcards.test),
+    )
+
+
 def get_chunk_labels(wildcards):
     """The identification tables of every camera and chunk of a test."""
     return expand(
@@ -346,7 +355,9 @@ def get_chunk_labels(wildcards):
 def get_final_outputs():
     """Everything the default target builds: the kit; per simulated test its test folder and
     simulation_check.json; per recorded test its inventory.json; per test and camera its
-    calibration and frame map; per test the labels of every camera's chunk starts."""
+    calibration and frame map; per test the labels of every camera's chunk starts and the
+    first-frame reconstruction (cameras.json, points.parquet, quality.json and its picture).
+    """
     outputs = [KIT_DIR]
     for test in SIMULATED:
         outputs += expand(
@@ -382,5 +393,14 @@ def get_final_outputs():
             test=test,
             camera=get_cameras(test),
         )
-        outputs.append(f"results/{test}/labels.parquet")
+        outputs += expand(
+            [
+                "results/{test}/labels.parquet",
+                "results/{test}/cameras.json",
+                "results/{test}/points.parquet",
+                "results/{test}/quality.json",
+                "results/{test}/reconstruction/reconstruction.png",
+            ],
+            test=test,
+        )
     return outputs

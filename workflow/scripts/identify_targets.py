@@ -1,19 +1,16 @@
 """Rule identify_targets: detect and label every target in the first frame of one camera's chunk."""
 
 import cv2
-import numpy as np
 
-from triaxtrack.calibrate import read_calibration
+from triaxtrack.calibrate import calibrated_camera, read_calibration
 from triaxtrack.identify import draw_labels, label_chunk_start
 from triaxtrack.kit import ct_codes, load_kit_design, target_table
 from triaxtrack.logs import log_to
-from triaxtrack.optics import Camera
 from triaxtrack.tables import FRAME_MAP, LABELS, read_table, write_table
 
 log_to(snakemake.log[0])
 
-cal = read_calibration(snakemake.input.calibration)
-camera = Camera.from_json(snakemake.wildcards.camera, {**cal, "R": np.eye(3), "t": np.zeros(3)})
+camera = calibrated_camera(read_calibration(snakemake.input.calibration))
 design = load_kit_design(snakemake.input.kit)
 codes = ct_codes(design, target_table(design))
 fmap = read_table(snakemake.input.frames, FRAME_MAP)

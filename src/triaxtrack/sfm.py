@@ -1,0 +1,367 @@
+"""Cameras and cell in air: structure from motion on the labelled cell-wall targets.
+
+The paper's section 2.3 (last part) and 3.1. The target IDs are the correspondences, so there is
+no feature matching:
+
+1. each camera's pose by PnP (RANSAC, then Levenberg-Marquardt) against the kit's design
+   coordinates of the cell-wall targets it labelled (:func:`initial_poses`);
+2. one bundle adjustment with pycolmap over every camera and every cell-wall target seen by two
+   or more cameras, the intrinsics fixed from calibration unless ``refine_intrinsics``
+   (:func:`bundle_adjust`); observations whose residual exceeds ``max_residual_px`` are
+   dropped and the adjustment is run again;
+3. the scale and the frame from the design: the similarity that best maps the adjusted targets
+   onto their design positions (:func:`similarity_transform`);
+4. the cell's outer cylinder fitted to the 3-D targets (:func:`fit_cylinder`), and every camera
+   and point moved so that its axis is the z axis (:func:`axis_frame`): the frame in which
+   :mod:`triaxtrack.optics` traces rays through the wall.
+
+The rotation about the axis and the height of the origin are fixed later, from the bottom
+pedestal's coded targets (:func:`triaxtrack.triangulate.pedestal_frame`), as ``target-kit.md``
+defines the cell frame. Units: millimetres, pixels in OpenCV convention (the centre of the
+top-left pixel is (0, 0)); pycolmap's convention (pixel centres at +0.5) is converted on the
+way in and out.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+
+import cv2
+import numpy as np
+import pandas as pd
+from scipy.optimize import least_squares
+
+from triaxtrack.optics import Camera, project_air
+
+COLMAP_PIXEL_OFFSET = 0.5  # COLMAP puts the centre of the top-left pixel at (0.5, 0.5)
+FULL_OPENCV_DIST = 8  # k1 k2 p1 p2 k3 k4 k5 k6: COLMAP's FULL_OPENCV holds both OpenCV models
+
+
+@dataclass(frozen=True)
+class SfmConfig:
+    """Settings of the cameras-and-cell reconstruction (config ``reconstruction``).
+
+    ``ransac_px``: PnP inlier threshold; ``max_residual_px``: an observation whose residual after
+    the bundle adjustment exceeds this is dropped (and the adjustment run again);
+    ``min_targets``: a camera with fewer cell-wall targets (after PnP) is left out, with the
+    reason; ``refine_intrinsics``: let the bundle adjustment refine focal lengths, principal
+    point and distortion (by default they stay as calibrated).
+    """
+
+    ransac_px: float = 2.0
+    max_residual_px: float = 1.0
+    min_targets: int = 12
+    refine_intrinsics: bool = False
+
+    @staticmethod
+    def from_dict(d: dict | None) -> SfmConfig:
+        known = {f.name for f in fields(SfmConfig)}
+        return SfmConfig(**{k: v for k, v in (d or {}).items() if k in known})
+
+
+@dataclass(frozen=True)
+class Cylinder:
+    """A fitted cylinder: a point on its axis and the axis direction (unit), mm."""
+
+    point: np.ndarray  # (3,)
+    direction: np.ndarray  # (3,)
+    radius: float
+    rms_mm: float  # RMS distance of the points from the surface
+
+
+@dataclass(frozen=True)
+class CellReconstruction:
+    """The cameras and the cell wall in the axis frame (cell axis = z axis, scale and +z from
+    the design; rotation about z and height of the origin still those of the printed cell)."""
+
+    cameras: dict[str, Camera]
+    points: pd.DataFrame  # id, x_mm, y_mm, z_mm, n_rays, rms_px
+    residuals: pd.DataFrame  # camera, frame, id, u_px, v_px, du_px, dv_px, used, reason
+    cylinder: Cylinder  # in the axis frame: point (0, 0, 0), direction (0, 0, 1)
+    axis_tilt_deg: float  # angle of the fitted axis from the design's z axis
+    scale: float  # design scale over the adjusted model's (1 when the design is exact)
+    dropped: dict[str, str]  # camera -> why it was left out
+
+
+def earliest_observations(labels: pd.DataFrame, ids: np.ndarray, min_targets: int = 1) -> pd.DataFrame:
+    """Per camera, its labelled rows of targets ``ids`` at the earliest frame where it has at
+    least ``min_targets`` of them (the cell does not move: any frame gives the camera's pose).
+    ``labels``: rows ``camera, frame, id, u_px, v_px`` (id -1, unlabelled, ignored)."""
+    lab = labels[labels["id"].isin(ids)]
+    counts = lab.groupby(["camera", "frame"]).size()
+    counts = counts[counts >= min_targets].reset_index()
+    first = counts.groupby("camera")["frame"].min()
+    keep = lab["frame"].to_numpy() == lab["camera"].map(first).to_numpy()
+    return lab[keep].reset_index(drop=True)
+
+
+def initial_poses(
+    cameras: dict[str, Camera], observations: pd.DataFrame, design: pd.DataFrame, cfg: SfmConfig
+) -> tuple[dict[str, Camera], pd.DataFrame, dict[str, str]]:
+    """Each camera's pose by PnP against the design positions of the targets it labelled.
+
+    ``cameras``: calibrated intrinsics (pose ignored); ``observations``: rows ``camera, frame,
+    id, u_px, v_px``; ``design``: ``id, x_mm, y_mm, z_mm``. Returns the posed cameras, the
+    observations with a bool column ``inlier``, and the cameras left out with the reason.
+    """
+    xyz = design.set_index("id")[["x_mm", "y_mm", "z_mm"]]
+    posed, dropped, parts = {}, {}, []
+    for name, cam in sorted(cameras.items()):
+        obs = observations[observations["camera"] == name]
+        if len(obs) < cfg.min_targets:
+            dropped[name] = f"{len(obs)} cell-wall targets labelled, fewer than {cfg.min_targets}"
+            continue
+        X = xyz.loc[obs["id"]].to_numpy(np.float64)
+        uv = obs[["u_px", "v_px"]].to_numpy(np.float64)
+        ok, rvec, tvec, inl = cv2.solvePnPRansac(
+            X, uv, cam.K, cam.dist, reprojectionError=cfg.ransac_px, flags=cv2.SOLVEPNP_SQPNP
+        )
+        inlier = np.zeros(len(obs), bool)
+        if ok and inl is not None:
+            inlier[inl.ravel()] = True
+        if inlier.sum() < cfg.min_targets:
+            dropped[name] = f"PnP found {int(inlier.sum())} consistent cell-wall targets of {len(obs)}"
+            continue
+        rvec, tvec = cv2.solvePnPRefineLM(X[inlier], uv[inlier], cam.K, cam.dist, rvec, tvec)
+        posed[name] = Camera(
+            name, cam.width, cam.height, cam.K, cam.dist, cv2.Rodrigues(rvec)[0], tvec.ravel()
+        )
+        parts.append(obs.assign(inlier=inlier))
+    cols = [*observations.columns, "inlier"]
+    out = pd.concat(parts, ignore_index=True) if parts else pd.DataFrame(columns=cols)
+    return posed, out, dropped
+
+
+def _colmap_camera(cam: Camera, camera_id: int):
+    import pycolmap
+
+    if len(cam.dist) > FULL_OPENCV_DIST:
+        raise ValueError(f"{cam.name}: {len(cam.dist)} distortion coefficients; at most 8 are supported")
+    dist = np.zeros(FULL_OPENCV_DIST)
+    dist[: len(cam.dist)] = cam.dist
+    K = cam.K
+    params = [K[0, 0], K[1, 1], K[0, 2] + COLMAP_PIXEL_OFFSET, K[1, 2] + COLMAP_PIXEL_OFFSET, *dist]
+    return pycolmap.Camera(
+        model="FULL_OPENCV", width=cam.width, height=cam.height, params=params, camera_id=camera_id
+    )
+
+
+def _from_colmap(cam: Camera, colmap_camera, cam_from_world) -> Camera:
+    p = np.asarray(colmap_camera.params, float)
+    K = np.array([[p[0], 0, p[2] - COLMAP_PIXEL_OFFSET], [0, p[1], p[3] - COLMAP_PIXEL_OFFSET], [0, 0, 1.0]])
+    dist = p[4 : 4 + max(len(cam.dist), 5)]
+    M = np.asarray(cam_from_world.matrix(), float)
+    return Camera(cam.name, cam.width, cam.height, K, dist, M[:, :3], M[:, 3])
+
+
+def bundle_adjust(
+    cameras: dict[str, Camera], observations: pd.DataFrame, points: pd.DataFrame, refine_intrinsics: bool
+) -> tuple[dict[str, Camera], pd.DataFrame]:
+    """One pycolmap bundle adjustment of camera poses and 3-D points (intrinsics fixed unless
+    ``refine_intrinsics``), in the gauge of the starting poses.
+
+    ``observations``: rows ``camera, id, u_px, v_px`` (distorted pixels, OpenCV convention);
+    ``points``: starting ``id, x_mm, y_mm, z_mm`` of every observed id. Returns the adjusted
+    cameras and points (same columns). pycolmap's FULL_OPENCV model stands for OpenCV's
+    5-coefficient and rational models alike (missing coefficients are zero).
+    """
+    import pycolmap
+
+    rec = pycolmap.Reconstruction()
+    start = points.set_index("id")[["x_mm", "y_mm", "z_mm"]]
+    point_ids = {int(i): rec.add_point3D(start.loc[i].to_numpy(float), pycolmap.Track()) for i in start.index}
+    image_ids = {}
+    for k, (name, cam) in enumerate(sorted(cameras.items()), start=1):
+        obs = observations[observations["camera"] == name]
+        rec.add_camera_with_trivial_rig(_colmap_camera(cam, k))
+        image = pycolmap.Image(
+            name=name,
+            keypoints=obs[["u_px", "v_px"]].to_numpy(np.float64) + COLMAP_PIXEL_OFFSET,
+            camera_id=k,
+            image_id=k,
+        )
+        rec.add_image_with_trivial_frame(image, pycolmap.Rigid3d(pycolmap.Rotation3d(cam.R), cam.t))
+        for j, tid in enumerate(obs["id"].to_numpy()):
+            rec.add_observation(point_ids[int(tid)], pycolmap.TrackElement(k, j))
+            rec.image(k).set_point3D_for_point2D(j, point_ids[int(tid)])
+        image_ids[name] = k
+    opts = pycolmap.BundleAdjustmentOptions()
+    opts.refine_focal_length = refine_intrinsics
+    opts.refine_principal_point = refine_intrinsics
+    opts.refine_extra_params = refine_intrinsics
+    opts.print_summary = False
+    pycolmap.bundle_adjustment(rec, opts)
+    out_cams = {
+        name: _from_colmap(cameras[name], rec.camera(k), rec.image(k).cam_from_world())
+        for name, k in image_ids.items()
+    }
+    xyz = np.array([rec.point3D(point_ids[int(i)]).xyz for i in start.index]).reshape(-1, 3)
+    out_pts = pd.DataFrame({"id": start.index.to_numpy(np.int64), "x_mm": xyz[:, 0], "y_mm": xyz[:, 1],
+                            "z_mm": xyz[:, 2]})  # fmt: skip
+    return out_cams, out_pts
+
+
+def reprojection_residuals(
+    cameras: dict[str, Camera], observations: pd.DataFrame, points: pd.DataFrame
+) -> pd.DataFrame:
+    """``observations`` with ``du_px, dv_px``: reprojection minus observation, seen in air
+    (NaN where the camera or the point is unknown)."""
+    xyz = points.set_index("id")[["x_mm", "y_mm", "z_mm"]]
+    du = np.full(len(observations), np.nan)
+    dv = np.full(len(observations), np.nan)
+    for name, idx in observations.groupby("camera").indices.items():
+        obs = observations.iloc[idx]
+        known = obs["id"].isin(xyz.index).to_numpy()
+        if name not in cameras or not known.any():
+            continue
+        sel = idx[known]
+        uv = project_air(cameras[name], xyz.loc[obs["id"][known]].to_numpy())
+        du[sel] = uv[:, 0] - obs["u_px"].to_numpy()[known]
+        dv[sel] = uv[:, 1] - obs["v_px"].to_numpy()[known]
+    return observations.assign(du_px=du, dv_px=dv)
+
+
+def similarity_transform(src: np.ndarray, dst: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
+    """Least-squares similarity ``dst ~ s A src + b`` of two (N, 3) point sets (Umeyama 1991).
+    Returns ``(s, A, b)``, ``A`` a proper rotation."""
+    ms, md = src.mean(axis=0), dst.mean(axis=0)
+    a, b = src - ms, dst - md
+    U, S, Vt = np.linalg.svd(b.T @ a / len(src))
+    D = np.eye(3)
+    D[2, 2] = np.sign(np.linalg.det(U @ Vt))
+    A = U @ D @ Vt
+    s = float(np.trace(np.diag(S) @ D) / (a**2).sum(axis=1).mean())
+    return s, A, md - s * A @ ms
+
+
+def transform_points(
+    points: pd.DataFrame, scale: float, rotation: np.ndarray, translation: np.ndarray
+) -> pd.DataFrame:
+    """A copy of ``points`` (columns ``x_mm, y_mm, z_mm``) moved by ``x' = s A x + b``."""
+    xyz = points[["x_mm", "y_mm", "z_mm"]].to_numpy(float)
+    new = scale * xyz @ np.asarray(rotation, float).T + np.asarray(translation, float).reshape(3)
+    return points.assign(x_mm=new[:, 0], y_mm=new[:, 1], z_mm=new[:, 2])
+
+
+def fit_cylinder(points_mm: np.ndarray, direction0: tuple[float, float, float] = (0.0, 0.0, 1.0)) -> Cylinder:
+    """Least-squares cylinder through (N, 3) points, axis near ``direction0``.
+
+    The axis is parametrised by its point in the plane through the centroid normal to
+    ``direction0`` and two small tilts; residuals are distances to the surface, mm.
+    """
+    pts = np.asarray(points_mm, float)
+    d0 = np.asarray(direction0, float) / np.linalg.norm(direction0)
+    e1 = np.cross(d0, [1.0, 0.0, 0.0] if abs(d0[0]) < 0.9 else [0.0, 1.0, 0.0])
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(d0, e1)
+    c0 = pts.mean(axis=0)
+
+    def axis(p):
+        d = d0 + p[2] * e1 + p[3] * e2
+        return c0 + p[0] * e1 + p[1] * e2, d / np.linalg.norm(d)
+
+    def resid(p):
+        o, d = axis(p)
+        v = pts - o
+        radial = v - np.outer(v @ d, d)
+        return np.sqrt((radial**2).sum(axis=1)) - p[4]
+
+    v = pts - c0
+    r0 = float(np.sqrt(((v - np.outer(v @ d0, d0)) ** 2).sum(axis=1)).mean())
+    sol = least_squares(resid, np.array([0.0, 0.0, 0.0, 0.0, r0]), x_scale=[1.0, 1.0, 1e-3, 1e-3, 1.0])
+    o, d = axis(sol.x)
+    return Cylinder(o, d, float(sol.x[4]), float(np.sqrt(np.mean(sol.fun**2))))
+
+
+def axis_frame(
+    cylinder: Cylinder, origin_near: tuple[float, float, float] = (0.0, 0.0, 0.0)
+) -> tuple[np.ndarray, np.ndarray]:
+    """The rigid motion ``x' = A x + b`` that puts the cylinder's axis on the z axis (keeping its
+    sense) with the point of the axis nearest ``origin_near`` at the origin, by the smallest
+    rotation. Returns ``(A, b)``."""
+    d = cylinder.direction / np.linalg.norm(cylinder.direction)
+    z = np.array([0.0, 0.0, 1.0])
+    axis = np.cross(d, z)
+    s, c = np.linalg.norm(axis), float(d @ z)
+    A = np.eye(3) if s < 1e-15 else cv2.Rodrigues(axis / s * np.arctan2(s, c))[0]
+    foot = cylinder.point + ((np.asarray(origin_near, float) - cylinder.point) @ d) * d
+    return A, -A @ foot
+
+
+def reconstruct_cell(
+    cameras: dict[str, Camera], labels: pd.DataFrame, design: pd.DataFrame, cfg: SfmConfig
+) -> CellReconstruction:
+    """Cameras and cell wall from the labelled cell-wall targets (module docstring).
+
+    ``cameras``: calibrated intrinsics per camera; ``labels``: rows ``camera, frame, id, u_px,
+    v_px`` (every labelled frame; per camera its earliest frame with enough cell-wall targets
+    is used); ``design``: ``id, x_mm, y_mm, z_mm`` of the cell-wall targets (design positions).
+    Raises ValueError when fewer than two cameras can be posed.
+    """
+    obs = earliest_observations(labels, design["id"].to_numpy(), cfg.min_targets)
+    posed, obs, dropped = initial_poses(cameras, obs, design, cfg)
+    for name in sorted(set(cameras) - set(posed) - set(dropped)):
+        dropped[name] = "no frame with enough labelled cell-wall targets"
+    if len(posed) < 2:
+        raise ValueError(f"cameras and cell: only {len(posed)} camera(s) could be posed; {dropped}")
+    used = obs["inlier"].to_numpy().copy()
+    reason = np.where(used, "", "PnP outlier").astype(object)
+    start = design
+    for _ in range(3):
+        counts = obs.loc[used, "id"].value_counts()
+        multi = obs["id"].map(counts).fillna(0).to_numpy() >= 2
+        reason[used & ~multi] = "seen by one camera"
+        used &= multi
+        sel = obs[used]
+        adj_cams, adj_pts = bundle_adjust(
+            posed, sel, start[start["id"].isin(sel["id"])], cfg.refine_intrinsics
+        )
+        res = reprojection_residuals(adj_cams, obs, adj_pts)
+        err = np.hypot(res["du_px"], res["dv_px"]).to_numpy()
+        bad = used & ~(err <= cfg.max_residual_px)
+        if not bad.any():
+            break
+        reason[bad] = f"residual above {cfg.max_residual_px} px"
+        used &= ~bad
+    s, A, b = similarity_transform(
+        adj_pts[["x_mm", "y_mm", "z_mm"]].to_numpy(),
+        design.set_index("id").loc[adj_pts["id"], ["x_mm", "y_mm", "z_mm"]].to_numpy(),
+    )
+    pts = transform_points(adj_pts, s, A, b)
+    cyl = fit_cylinder(pts[["x_mm", "y_mm", "z_mm"]].to_numpy())
+    tilt = float(np.degrees(np.arccos(np.clip(abs(cyl.direction[2]), -1.0, 1.0))))
+    A2, b2 = axis_frame(cyl)
+    pts = transform_points(pts, 1.0, A2, b2)
+    cams = {n: c.transformed(s, A, b).transformed(1.0, A2, b2) for n, c in adj_cams.items()}
+    res = reprojection_residuals(cams, obs, pts).assign(used=used, reason=reason)
+    err = np.hypot(res["du_px"], res["dv_px"]).to_numpy()
+    stats = pd.DataFrame({"id": res["id"], "e2": err**2, "used": used})[used]
+    per = stats.groupby("id").agg(n_rays=("e2", "size"), ms=("e2", "mean"))
+    pts = pts.set_index("id").join(per).reset_index()
+    pts = pts.assign(n_rays=pts["n_rays"].astype(np.int64), rms_px=np.sqrt(pts.pop("ms")))
+    cylinder = Cylinder(np.zeros(3), np.array([0.0, 0.0, 1.0]), cyl.radius, cyl.rms_mm)
+    return CellReconstruction(cams, pts, res.drop(columns="inlier"), cylinder, tilt, s, dropped)
+
+
+def cell_summary(rec: CellReconstruction) -> dict:
+    """The reconstruction as JSON: ``cameras`` (as ``cameras.json``, in the axis frame), the
+    fitted ``cell`` and what was left out (``cameras_dropped``)."""
+    used = rec.residuals[rec.residuals["used"]]
+    err = np.hypot(used["du_px"], used["dv_px"])
+    n = len(rec.points)
+    return {
+        "frame": "axis frame: cell axis = z axis; rotation about it and origin height from the printed cell",
+        "cameras": {name: cam.to_json() for name, cam in sorted(rec.cameras.items())},
+        "cell": {
+            "outer_radius_mm": rec.cylinder.radius,
+            "outer_radius_sigma_mm": rec.cylinder.rms_mm / np.sqrt(max(n, 1)),
+            "cylinder_rms_mm": rec.cylinder.rms_mm,
+            "axis_tilt_deg": rec.axis_tilt_deg,
+            "targets": n,
+        },
+        "design_scale": rec.scale,
+        "mean_reprojection_px": float(err.mean()) if len(err) else float("nan"),
+        "observations_used": int(len(used)),
+        "observations_dropped": int((~rec.residuals["used"]).sum()),
+        "cameras_dropped": dict(sorted(rec.dropped.items())),
+    }

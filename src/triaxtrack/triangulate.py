@@ -1,0 +1,411 @@
+"""Targets in the water, by ray tracing through the cell wall (the paper's section 3.2).
+
+Each observation of a pedestal or membrane target is a ray: undistorted with the camera's
+calibration, traced from the camera centre, refracted by Snell's law at the outer wall (air to
+acrylic) and the inner wall (acrylic to water) (:func:`water_rays`). A point's first estimate
+is the least-squares intersection of its rays in the water (:func:`intersect_rays`); it is then
+refined by Gauss-Newton on the reprojection error through the full refractive path
+(:func:`refine_points`, exact projection by :func:`triaxtrack.optics.project_water`), which
+weighs every ray by its image precision rather than by its length in the water. An observation
+whose residual exceeds ``max_residual_px`` is dropped, the worst first, and its point solved
+again. Each point reports ``n_rays``, ``rms_px`` and ``sigma_mm``: the standard error of its
+position, from the a-posteriori image noise and the geometry of its rays.
+
+:func:`refine_cell` goes beyond the seed: one refractive bundle adjustment of the outer radius,
+the wall thickness and the water's refractive index over all targets (the cameras held), by
+variable projection (the points re-triangulated for every trial of the three parameters).
+
+:func:`pedestal_frame` fixes what the cell wall cannot: the rotation about the axis and the
+height of the origin, from the bottom pedestal's coded targets, so that the results are in the
+cell frame of ``target-kit.md`` (origin on the bottom pedestal face, +x towards CT 17).
+Millimetres in the (axis-aligned) cell frame; pixels in OpenCV convention.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields, replace
+
+import numpy as np
+import pandas as pd
+from scipy.optimize import least_squares
+
+from triaxtrack.optics import Camera, CellOptics, pixels_to_normalized, project_water, trace_into_water
+from triaxtrack.sfm import transform_points
+
+FD_STEP_MM = 1e-4  # finite-difference step of the point Jacobians (the projection is exact to ~1e-8 px)
+REFINE_CELL_STEPS = (0.01, 0.01, 1e-4)  # finite-difference steps: outer radius mm, wall mm, n_water
+UNPROJECTED_PX = 10.0  # residual counted for an observation whose point no longer projects
+
+
+@dataclass(frozen=True)
+class TriangulationConfig:
+    """Settings of the ray tracing (config ``reconstruction``).
+
+    ``min_rays``: a point needs this many observations after outlier removal;
+    ``max_residual_px``: observations above this residual are dropped, the worst of a point
+    first; ``iterations``: Gauss-Newton steps on the reprojection error;
+    ``refine_cell``: run :func:`refine_cell`; ``refine_cell_points``: how many points (spread
+    over the IDs) it uses.
+    """
+
+    min_rays: int = 2
+    max_residual_px: float = 1.0
+    iterations: int = 3
+    refine_cell: bool = False
+    refine_cell_points: int = 600
+
+    @staticmethod
+    def from_dict(d: dict | None) -> TriangulationConfig:
+        known = {f.name for f in fields(TriangulationConfig)}
+        return TriangulationConfig(**{k: v for k, v in (d or {}).items() if k in known})
+
+
+def water_rays(camera: Camera, uv_px: np.ndarray, cell: CellOptics) -> tuple[np.ndarray, np.ndarray]:
+    """The rays in the water of (N, 2) distorted pixels: ``(origins, dirs)``, (N, 3) each, the
+    origin on the inner wall and the unit direction away from the camera (NaN where the ray
+    misses the cell or the pixel cannot be undistorted)."""
+    path = trace_into_water(camera, pixels_to_normalized(camera, uv_px), cell)
+    return path.inner_hit, path.dir_water
+
+
+def intersect_rays(origins: np.ndarray, dirs: np.ndarray, group: np.ndarray, n_groups: int) -> np.ndarray:
+    """(n_groups, 3) least-squares intersections of rays grouped by ``group`` (N ints in
+    ``[0, n_groups)``): the point nearest all of its rays. NaN for a group of fewer than two
+    rays or of parallel rays. ``dirs`` unit (N, 3)."""
+    P = np.eye(3)[None] - dirs[:, :, None] * dirs[:, None, :]
+    A = np.zeros((n_groups, 3, 3))
+    b = np.zeros((n_groups, 3))
+    np.add.at(A, group, P)
+    np.add.at(b, group, np.einsum("nij,nj->ni", P, origins))
+    out = np.full((n_groups, 3), np.nan)
+    ok = np.linalg.cond(A) < 1e8
+    out[ok] = np.linalg.solve(A[ok], b[ok][:, :, None])[:, :, 0]
+    return out
+
+
+def _project_all(
+    cameras: dict[str, Camera], cam_of: np.ndarray, xyz: np.ndarray, cell: CellOptics, xy0: np.ndarray
+) -> np.ndarray:
+    """(N, 2) exact pixels of points ``xyz`` (N, 3) in cameras ``cam_of`` (N names)."""
+    uv = np.full((len(xyz), 2), np.nan)
+    for name in np.unique(cam_of):
+        sel = cam_of == name
+        uv[sel] = project_water(cameras[name], xyz[sel], cell, xy0=xy0[sel])[0]
+    return uv
+
+
+def refine_points(
+    cameras: dict[str, Camera],
+    cam_of: np.ndarray,
+    uv_px: np.ndarray,
+    group: np.ndarray,
+    xyz: np.ndarray,
+    cell: CellOptics,
+    iterations: int = 3,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Gauss-Newton on the reprojection error through the refractive path.
+
+    Observations: ``cam_of`` (N camera names), ``uv_px`` (N, 2) distorted pixels, ``group``
+    (N point indices into ``xyz``, (M, 3) starting points). Returns the refined points (M, 3),
+    the final residuals (N, 2; projection minus observation, NaN where the point does not
+    project) and ``(J^T J)^-1`` per point (M, 3, 3), pixel^-2 mm^2.
+    """
+    xyz = np.array(xyz, float, copy=True)
+    m = len(xyz)
+    xy0 = np.full((len(uv_px), 2), np.nan)
+    for name in np.unique(cam_of):
+        sel = cam_of == name
+        xy0[sel] = pixels_to_normalized(cameras[name], uv_px[sel])
+    cov = np.full((m, 3, 3), np.nan)
+    for it in range(iterations + 1):
+        p = xyz[group]
+        r = _project_all(cameras, cam_of, p, cell, xy0) - uv_px
+        J = np.stack(
+            [(_project_all(cameras, cam_of, p + FD_STEP_MM * e, cell, xy0) - uv_px - r) / FD_STEP_MM
+             for e in np.eye(3)], axis=2,
+        )  # fmt: skip
+        ok = np.isfinite(r).all(axis=1) & np.isfinite(J).all(axis=(1, 2))
+        JtJ = np.zeros((m, 3, 3))
+        Jtr = np.zeros((m, 3))
+        np.add.at(JtJ, group[ok], np.einsum("nki,nkj->nij", J[ok], J[ok]))
+        np.add.at(Jtr, group[ok], np.einsum("nki,nk->ni", J[ok], r[ok]))
+        good = np.linalg.cond(JtJ) < 1e12
+        cov[:] = np.nan
+        cov[good] = np.linalg.inv(JtJ[good])
+        if it == iterations:
+            break
+        xyz[good] -= np.einsum("mij,mj->mi", cov[good], Jtr[good])
+    return xyz, r, cov
+
+
+@dataclass(frozen=True)
+class WaterTargets:
+    """Triangulated targets and the fate of every observation."""
+
+    points: pd.DataFrame  # id, x_mm, y_mm, z_mm, n_rays, rms_px, sigma_mm
+    residuals: pd.DataFrame  # the observations with du_px, dv_px, used, reason
+    sigma0_px: float  # a-posteriori image noise (RMS residual, corrected for the 3 unknowns a point)
+
+
+def _solve(cameras, obs: pd.DataFrame, cell: CellOptics, cfg: TriangulationConfig):
+    """Intersect and refine every id of ``obs`` (all rows used). Returns ids, xyz, residuals, cov."""
+    ids, group = np.unique(obs["id"].to_numpy(), return_inverse=True)
+    cam_of = obs["camera"].to_numpy().astype(str)
+    uv = obs[["u_px", "v_px"]].to_numpy(float)
+    origins = np.full((len(obs), 3), np.nan)
+    dirs = np.full((len(obs), 3), np.nan)
+    for name in np.unique(cam_of):
+        sel = cam_of == name
+        origins[sel], dirs[sel] = water_rays(cameras[name], uv[sel], cell)
+    ok = np.isfinite(dirs).all(axis=1)
+    xyz0 = intersect_rays(origins[ok], dirs[ok], group[ok], len(ids))
+    xyz, r, cov = refine_points(cameras, cam_of, uv, group, xyz0, cell, cfg.iterations)
+    return ids, group, xyz, r, cov
+
+
+def triangulate_refracted(
+    cameras: dict[str, Camera], observations: pd.DataFrame, cell: CellOptics, cfg: TriangulationConfig
+) -> WaterTargets:
+    """3-D points of targets in the water from their labelled pixels in several cameras.
+
+    ``observations``: rows ``camera, frame, id, u_px, v_px`` of one frame (distorted pixels);
+    cameras not in ``cameras`` are ignored. Outliers are dropped one per point and round, the
+    worst first, until every residual is within ``cfg.max_residual_px``; a point left with fewer
+    than ``cfg.min_rays`` rays is not reported.
+    """
+    obs = observations[observations["camera"].isin(list(cameras))].reset_index(drop=True)
+    used = np.ones(len(obs), bool)
+    reason = np.full(len(obs), "", object)
+    du = np.full(len(obs), np.nan)
+    dv = np.full(len(obs), np.nan)
+    while True:
+        counts = obs.loc[used, "id"].value_counts()
+        few = used & (obs["id"].map(counts).fillna(0).to_numpy() < cfg.min_rays)
+        reason[few] = f"fewer than {cfg.min_rays} rays"
+        used &= ~few
+        idx = np.flatnonzero(used)
+        ids, group, xyz, r, cov = _solve(cameras, obs.iloc[idx], cell, cfg)
+        du[idx], dv[idx] = r[:, 0], r[:, 1]
+        err = np.hypot(r[:, 0], r[:, 1])
+        err = np.where(np.isfinite(err), err, np.inf)
+        worst = pd.Series(err).groupby(group).idxmax().to_numpy()
+        worst = worst[err[worst] > cfg.max_residual_px]
+        if worst.size == 0:
+            break
+        reason[idx[worst]] = np.where(
+            np.isfinite(err[worst]), f"residual above {cfg.max_residual_px} px", "does not project"
+        )
+        used[idx[worst]] = False
+    n_rays = np.bincount(group, minlength=len(ids))
+    e2 = np.bincount(group, weights=err**2, minlength=len(ids))
+    dof = max(2 * len(group) - 3 * len(ids), 1)
+    sigma0 = float(np.sqrt(e2.sum() / dof))
+    points = pd.DataFrame({
+        "id": ids.astype(np.int64), "x_mm": xyz[:, 0], "y_mm": xyz[:, 1], "z_mm": xyz[:, 2],
+        "n_rays": n_rays.astype(np.int64), "rms_px": np.sqrt(e2 / np.maximum(n_rays, 1)),
+        "sigma_mm": sigma0 * np.sqrt(np.trace(cov, axis1=1, axis2=2)),
+    })  # fmt: skip
+    points = points[np.isfinite(points[["x_mm", "y_mm", "z_mm"]]).all(axis=1)].reset_index(drop=True)
+    residuals = obs.assign(du_px=du, dv_px=dv, used=used, reason=reason)
+    return WaterTargets(points, residuals, sigma0)
+
+
+def _sample_ids(ids: np.ndarray, n: int) -> np.ndarray:
+    """About ``n`` of ``ids``, evenly spread over the sorted list (all if fewer)."""
+    ids = np.unique(ids)
+    if len(ids) <= n:
+        return ids
+    return ids[np.linspace(0, len(ids) - 1, n).round().astype(int)]
+
+
+@dataclass(frozen=True)
+class CellRefinement:
+    """The refractive bundle adjustment of the cell (:func:`refine_cell`)."""
+
+    cell: CellOptics
+    rms_before_px: float
+    rms_after_px: float
+    points_used: int
+
+
+def refine_cell(
+    cameras: dict[str, Camera],
+    residuals: pd.DataFrame,
+    cell: CellOptics,
+    cfg: TriangulationConfig,
+    outer_radius_sigma_mm: float,
+) -> CellRefinement:
+    """Refine the outer radius, the wall thickness and the water's index over all targets.
+
+    Minimises the RMS reprojection error of ``cfg.refine_cell_points`` points, spread over the
+    IDs, re-triangulating them for every trial. ``residuals``: the used observations of
+    :func:`triangulate_refracted` (the outliers it dropped stay out). The cameras and the
+    acrylic's index are held (the index and the thickness of the wall are nearly
+    interchangeable). The outer radius is also measured in air (:func:`triaxtrack.sfm.fit_cylinder`,
+    standard error ``outer_radius_sigma_mm``) and enters as a prior: through the water alone the
+    three parameters are nearly interchangeable too.
+    """
+    obs = residuals[residuals["used"]]
+    obs = obs[obs["id"].isin(_sample_ids(obs["id"].to_numpy(), cfg.refine_cell_points))]
+    obs = obs.reset_index(drop=True)
+
+    def make(p: np.ndarray) -> CellOptics:
+        return replace(cell, outer_radius=p[0], inner_radius=p[0] - p[1], n_water=p[2])
+
+    p0 = np.array([cell.outer_radius, cell.outer_radius - cell.inner_radius, cell.n_water])
+
+    def pixels(p: np.ndarray) -> np.ndarray:
+        r = _solve(cameras, obs, make(p), cfg)[3].ravel()
+        return np.where(np.isfinite(r), r, UNPROJECTED_PX)
+
+    r0 = pixels(p0)
+    sigma0 = float(np.sqrt(np.mean(r0**2)))
+
+    def resid(p: np.ndarray) -> np.ndarray:
+        # the outer radius measured in air, as one more observation in image-noise units
+        prior = (p[0] - p0[0]) / outer_radius_sigma_mm * sigma0
+        return np.r_[pixels(p), prior]
+
+    sol = least_squares(resid, p0, diff_step=np.array(REFINE_CELL_STEPS) / p0, x_scale=[1e-3, 1.0, 1e-3])
+    after = float(np.sqrt(np.mean(sol.fun[:-1] ** 2)))
+    return CellRefinement(make(sol.x), sigma0, after, int(obs["id"].nunique()))
+
+
+def pedestal_frame(points: pd.DataFrame, design: pd.DataFrame) -> tuple[np.ndarray, np.ndarray, int]:
+    """The rotation about z and the shift along it that put the reconstructed bottom pedestal
+    CTs (ids in both ``points`` and ``design``, columns ``id, x_mm, y_mm, z_mm``) at their design
+    angle and height: returns ``(A, b, n)`` for ``x' = A x + b`` and the number of CTs used.
+    With no CT in common, the identity (``n = 0``)."""
+    common = points.merge(design, on="id", suffixes=("", "_d"))
+    if common.empty:
+        return np.eye(3), np.zeros(3), 0
+    dth = np.arctan2(common["y_mm"], common["x_mm"]) - np.arctan2(common["y_mm_d"], common["x_mm_d"])
+    angle = -float(np.angle(np.exp(1j * dth.to_numpy()).mean()))
+    c, s = np.cos(angle), np.sin(angle)
+    A = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    dz = float((common["z_mm_d"] - common["z_mm"]).mean())
+    return A, np.array([0.0, 0.0, dz]), len(common)
+
+
+@dataclass(frozen=True)
+class SpecimenReconstruction:
+    """The first-frame reconstruction in the cell frame (:func:`reconstruct_specimen`)."""
+
+    cameras: dict[str, Camera]
+    cell: CellOptics
+    points: pd.DataFrame  # POINTS columns + sigma_mm, every reconstructed target (cell wall too)
+    residuals: pd.DataFrame  # RESIDUALS columns + medium ('air' | 'water')
+    sigma0_px: float  # a-posteriori image noise of the water observations
+    refinement: CellRefinement | None
+    frame_fix: dict  # pedestal_cts, rotation_deg, shift_mm
+
+
+def reconstruct_specimen(
+    cameras: dict[str, Camera],
+    cell_points: pd.DataFrame,
+    air_residuals: pd.DataFrame,
+    labels: pd.DataFrame,
+    in_water: np.ndarray,
+    bottom_pedestal: pd.DataFrame,
+    cell: CellOptics,
+    outer_radius_sigma_mm: float,
+    cfg: TriangulationConfig,
+    frame: int,
+    time_s: float,
+) -> SpecimenReconstruction:
+    """Triangulate the targets in the water at ``frame`` and put everything in the cell frame.
+
+    ``cameras``, ``cell_points`` (``id, x_mm, y_mm, z_mm, n_rays, rms_px``) and
+    ``air_residuals``: the cameras-and-cell reconstruction in its axis frame
+    (:func:`triaxtrack.sfm.reconstruct_cell`); ``labels``: rows ``camera, frame, id, u_px,
+    v_px``; ``in_water``: the IDs of the targets in the water (pedestals, membrane);
+    ``bottom_pedestal``: design ``id, x_mm, y_mm, z_mm`` of the bottom pedestal's CTs (they fix
+    the rotation about the axis and the origin, :func:`pedestal_frame`). With
+    ``cfg.refine_cell`` the cell is refined first (:func:`refine_cell`) and the points solved
+    again with it.
+    """
+    obs = labels[(labels["frame"] == frame) & labels["id"].isin(in_water)]
+    obs = obs[["camera", "frame", "id", "u_px", "v_px"]].reset_index(drop=True)
+    water = triangulate_refracted(cameras, obs, cell, cfg)
+    refinement = None
+    if cfg.refine_cell:
+        refinement = refine_cell(cameras, water.residuals, cell, cfg, outer_radius_sigma_mm)
+        cell = refinement.cell
+        water = triangulate_refracted(cameras, obs, cell, cfg)
+    A, b, n = pedestal_frame(water.points[water.points["id"].isin(bottom_pedestal["id"])], bottom_pedestal)
+    air = cell_points.assign(sigma_mm=np.nan)
+    pts = pd.concat([air, water.points], ignore_index=True)
+    pts = transform_points(pts, 1.0, A, b).assign(frame=frame, time_s=time_s)
+    residuals = pd.concat(
+        [air_residuals.assign(medium="air"), water.residuals.assign(medium="water")], ignore_index=True
+    )
+    frame_fix = {
+        "pedestal_cts": n,
+        "rotation_deg": float(np.degrees(np.arctan2(A[1, 0], A[0, 0]))),
+        "shift_mm": float(b[2]),
+    }
+    return SpecimenReconstruction(
+        {name: cam.transformed(1.0, A, b) for name, cam in cameras.items()},
+        cell,
+        pts,
+        residuals,
+        water.sigma0_px,
+        refinement,
+        frame_fix,
+    )
+
+
+def quality_report(rec: SpecimenReconstruction, labels: pd.DataFrame, membrane_ids: np.ndarray) -> dict:
+    """``quality.json`` of the first frame: mean reprojection error (all used observations, and
+    in air and in water), per camera, counts of targets found and reconstructed, the cell used
+    and how the cell frame was fixed."""
+    res = rec.residuals
+    used = res[res["used"]]
+    err = np.hypot(used["du_px"], used["dv_px"])
+    per_camera = {
+        name: {
+            "mean_reprojection_px": float(err[g.index].mean()),
+            "observations_used": int(len(g)),
+            "observations_dropped": int((~res.loc[res["camera"] == name, "used"]).sum()),
+        }
+        for name, g in used.groupby("camera")
+    }
+    counts = []
+    for frame, pts in rec.points.groupby("frame"):
+        lab = labels[(labels["frame"] == frame) & (labels["id"] > 0)]
+        mem = pts[pts["id"].isin(membrane_ids)]
+        counts.append({
+            "frame": int(frame),
+            "time_s": float(pts["time_s"].iloc[0]),
+            "targets_labelled": int(lab["id"].nunique()),
+            "targets_reconstructed": int(len(pts)),
+            "membrane_dots": int(len(membrane_ids)),
+            "membrane_dots_reconstructed": int(len(mem)),
+            "membrane_dots_3_rays": int((mem["n_rays"] >= 3).sum()),
+            "median_sigma_mm": float(mem["sigma_mm"].median()) if len(mem) else float("nan"),
+        })  # fmt: skip
+    c = rec.cell
+    cell = {
+        "outer_radius_mm": c.outer_radius,
+        "inner_radius_mm": c.inner_radius,
+        "wall_thickness_mm": c.outer_radius - c.inner_radius,
+        "n_acrylic": c.n_acrylic,
+        "n_water": c.n_water,
+        "refined": rec.refinement is not None,
+    }
+    if rec.refinement is not None:
+        cell["refinement"] = {
+            "rms_before_px": rec.refinement.rms_before_px,
+            "rms_after_px": rec.refinement.rms_after_px,
+            "points_used": rec.refinement.points_used,
+        }
+    return {
+        "mean_reprojection_px": float(err.mean()),
+        "mean_reprojection_air_px": float(err[used["medium"] == "air"].mean()),
+        "mean_reprojection_water_px": float(err[used["medium"] == "water"].mean()),
+        "sigma0_water_px": rec.sigma0_px,
+        "per_camera": per_camera,
+        "frames": counts,
+        "cell": cell,
+        "cell_frame": rec.frame_fix,
+    }
