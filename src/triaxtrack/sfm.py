@@ -35,6 +35,7 @@ from triaxtrack.optics import Camera, project_air
 
 COLMAP_PIXEL_OFFSET = 0.5  # COLMAP puts the centre of the top-left pixel at (0.5, 0.5)
 FULL_OPENCV_DIST = 8  # k1 k2 p1 p2 k3 k4 k5 k6: COLMAP's FULL_OPENCV holds both OpenCV models
+MAX_BA_ROUNDS = 4  # bundle adjustments, each after dropping the observations above the limit
 
 
 @dataclass(frozen=True)
@@ -149,7 +150,9 @@ def _colmap_camera(cam: Camera, camera_id: int):
 def _from_colmap(cam: Camera, colmap_camera, cam_from_world) -> Camera:
     p = np.asarray(colmap_camera.params, float)
     K = np.array([[p[0], 0, p[2] - COLMAP_PIXEL_OFFSET], [0, p[1], p[3] - COLMAP_PIXEL_OFFSET], [0, 0, 1.0]])
-    dist = p[4 : 4 + max(len(cam.dist), 5)]
+    dist = p[4:]
+    if not dist[len(cam.dist) :].any():  # the coefficients the calibration had, unless more were refined
+        dist = dist[: len(cam.dist)]
     M = np.asarray(cam_from_world.matrix(), float)
     return Camera(cam.name, cam.width, cam.height, K, dist, M[:, :3], M[:, 3])
 
@@ -307,7 +310,7 @@ def reconstruct_cell(
     used = obs["inlier"].to_numpy().copy()
     reason = np.where(used, "", "PnP outlier").astype(object)
     start = design
-    for _ in range(3):
+    for rounds in range(1, MAX_BA_ROUNDS + 1):
         counts = obs.loc[used, "id"].value_counts()
         multi = obs["id"].map(counts).fillna(0).to_numpy() >= 2
         reason[used & ~multi] = "seen by one camera"
@@ -319,8 +322,8 @@ def reconstruct_cell(
         res = reprojection_residuals(adj_cams, obs, adj_pts)
         err = np.hypot(res["du_px"], res["dv_px"]).to_numpy()
         bad = used & ~(err <= cfg.max_residual_px)
-        if not bad.any():
-            break
+        if not bad.any() or rounds == MAX_BA_ROUNDS:
+            break  # (after the last round the few left above the limit stay in)
         reason[bad] = f"residual above {cfg.max_residual_px} px"
         used &= ~bad
     s, A, b = similarity_transform(
