@@ -9,7 +9,8 @@ refined by Gauss-Newton on the reprojection error through the full refractive pa
 weighs every ray by its image precision rather than by its length in the water. An observation
 whose residual exceeds ``max_residual_px`` is dropped, the worst first, and its point solved
 again. Each point reports ``n_rays``, ``rms_px`` and ``sigma_mm``: the standard error of its
-position, from the a-posteriori image noise and the geometry of its rays.
+position, from the geometry of its rays and the larger of the a-posteriori image noise of all
+points and of its own residuals.
 
 :func:`refine_cell` goes beyond the seed: one refractive bundle adjustment of the outer radius,
 the wall thickness and the water's refractive index over all targets (the cameras held), by
@@ -200,10 +201,12 @@ def triangulate_refracted(
     e2 = np.bincount(group, weights=err**2, minlength=len(ids))
     dof = max(2 * len(group) - 3 * len(ids), 1)
     sigma0 = float(np.sqrt(e2.sum() / dof))
+    # a point whose own rays disagree more than the image noise says so in its uncertainty
+    own = np.sqrt(e2 / np.maximum(2 * n_rays - 3, 1))
     points = pd.DataFrame({
         "id": ids.astype(np.int64), "x_mm": xyz[:, 0], "y_mm": xyz[:, 1], "z_mm": xyz[:, 2],
         "n_rays": n_rays.astype(np.int64), "rms_px": np.sqrt(e2 / np.maximum(n_rays, 1)),
-        "sigma_mm": sigma0 * np.sqrt(np.trace(cov, axis1=1, axis2=2)),
+        "sigma_mm": np.maximum(sigma0, own) * np.sqrt(np.trace(cov, axis1=1, axis2=2)),
     })  # fmt: skip
     points = points[np.isfinite(points[["x_mm", "y_mm", "z_mm"]]).all(axis=1)].reset_index(drop=True)
     residuals = obs.assign(du_px=du, dv_px=dv, used=used, reason=reason)
