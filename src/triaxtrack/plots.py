@@ -123,3 +123,31 @@ def draw_reconstruction(
     if title:
         cv2.putText(out, title, (10, PANEL_PX - 8), cv2.FONT_HERSHEY_SIMPLEX, 0.45, TEXT, 1)
     return out
+
+
+def reconstruction_picture(
+    cameras: dict[str, Camera],
+    points: pd.DataFrame,
+    cell: CellOptics,
+    observations: pd.DataFrame,
+    candidates: np.ndarray,
+    mean_reprojection_px: float,
+) -> np.ndarray:
+    """:func:`draw_reconstruction` with the traced rays of the candidate (e.g. membrane dot) seen
+    by the most cameras, the one nearest mid-height among them. ``observations``: the used
+    observations in the water, rows ``camera, id, u_px, v_px``."""
+    pool = points[points["id"].isin(candidates)]
+    if pool.empty:
+        return draw_reconstruction(
+            cameras, points, cell, [], None, f"{len(cameras)} cameras, {len(points)} targets"
+        )
+    pool = pool.assign(dz=(pool["z_mm"] - pool["z_mm"].median()).abs())
+    best = pool.sort_values(["n_rays", "dz"], ascending=[False, True]).iloc[0]
+    rays = traced_rays(cameras, observations, int(best["id"]), cell)
+    title = (
+        f"{len(cameras)} cameras, {len(points)} targets; dot {int(best['id'])}: "
+        f"{int(best['n_rays'])} rays; mean reprojection {mean_reprojection_px:.3f} px"
+    )
+    return draw_reconstruction(
+        cameras, points, cell, rays, best[["x_mm", "y_mm", "z_mm"]].to_numpy(float), title
+    )

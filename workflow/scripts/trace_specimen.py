@@ -8,7 +8,7 @@ import yaml
 from triaxtrack.kit import design_points, load_kit_design, target_table
 from triaxtrack.logs import log_to
 from triaxtrack.optics import cell_optics, read_cameras
-from triaxtrack.plots import draw_reconstruction, traced_rays
+from triaxtrack.plots import reconstruction_picture
 from triaxtrack.tables import LABELS, OBSERVATIONS, POINTS, RESIDUALS, read_table, write_table
 from triaxtrack.triangulate import TriangulationConfig, quality_report, reconstruct_specimen
 
@@ -63,15 +63,9 @@ write_table(rec.residuals, snakemake.output.residuals, RESIDUALS)
 with open(snakemake.output.quality, "w") as f:
     json.dump(quality, f, indent=2)
 
-# the picture: the membrane dot with the most rays, nearest mid-height
-water = rec.points[rec.points["id"].isin(membrane_ids)]
-best = water.assign(dz=(water["z_mm"] - water["z_mm"].median()).abs())
-best = best.sort_values(["n_rays", "dz"], ascending=[False, True]).iloc[0]
-rays = traced_rays(rec.cameras, used[used["medium"] == "water"], int(best["id"]), rec.cell)
-title = (
-    f"{len(rec.cameras)} cameras, {len(rec.points)} targets; dot {int(best['id'])}: "
-    f"{int(best['n_rays'])} rays; mean reprojection {quality['mean_reprojection_px']:.3f} px"
+water_used = used[used["medium"] == "water"]
+picture = reconstruction_picture(
+    rec.cameras, rec.points, rec.cell, water_used, membrane_ids, quality["mean_reprojection_px"]
 )
-xyz = best[["x_mm", "y_mm", "z_mm"]].to_numpy(float)
-cv2.imwrite(snakemake.output.picture, draw_reconstruction(rec.cameras, rec.points, rec.cell, rays, xyz, title))
+cv2.imwrite(snakemake.output.picture, picture)
 print(json.dumps({k: v for k, v in quality.items() if k != "per_camera"}, indent=2))
