@@ -273,3 +273,25 @@ def test_water_rays_of_a_missing_pixel_are_nan(scene):
     cam = scene["cameras"]["cam01"]
     origins, dirs = water_rays(cam, np.array([[5.0, 5.0], [cam.K[0, 2], cam.K[1, 2]]]), scene["cell"])
     assert np.isnan(dirs[0]).all() and np.isfinite(dirs[1]).all()
+
+
+def test_a_wrong_water_label_is_dropped_and_only_its_point_moves(scene):
+    obs = _water(scene).reset_index(drop=True)
+    cams, cfg = scene["cameras"], TriangulationConfig()
+    clean = triangulate_refracted(cams, obs, scene["cell"], cfg).points.set_index("id")
+    bad = obs.copy()
+    row = bad.index[bad["id"] == 2000][0]
+    bad.loc[row, "v_px"] += 4.0
+    got = triangulate_refracted(cams, bad, scene["cell"], cfg)
+    res = got.residuals
+    assert not res.loc[row, "used"] and res.loc[row, "reason"].startswith("residual above")
+    assert res["used"].sum() == len(res) - 1
+    pts = got.points.set_index("id")
+    assert (
+        np.linalg.norm(pts.loc[2000, ["x_mm", "y_mm", "z_mm"]] - scene["points"].set_index("id").loc[2000])
+        < 0.1
+    )
+    others = pts.index[pts.index != 2000]
+    np.testing.assert_allclose(
+        pts.loc[others, ["x_mm", "y_mm", "z_mm"]], clean.loc[others, ["x_mm", "y_mm", "z_mm"]]
+    )

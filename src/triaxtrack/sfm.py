@@ -309,7 +309,6 @@ def reconstruct_cell(
         raise ValueError(f"cameras and cell: only {len(posed)} camera(s) could be posed; {dropped}")
     used = obs["inlier"].to_numpy().copy()
     reason = np.where(used, "", "PnP outlier").astype(object)
-    start = design
     for rounds in range(1, MAX_BA_ROUNDS + 1):
         counts = obs.loc[used, "id"].value_counts()
         multi = obs["id"].map(counts).fillna(0).to_numpy() >= 2
@@ -317,7 +316,7 @@ def reconstruct_cell(
         used &= multi
         sel = obs[used]
         adj_cams, adj_pts = bundle_adjust(
-            posed, sel, start[start["id"].isin(sel["id"])], cfg.refine_intrinsics
+            posed, sel, design[design["id"].isin(sel["id"])], cfg.refine_intrinsics
         )
         res = reprojection_residuals(adj_cams, obs, adj_pts)
         err = np.hypot(res["du_px"], res["dv_px"]).to_numpy()

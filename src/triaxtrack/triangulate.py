@@ -171,43 +171,52 @@ def triangulate_refracted(
 
     ``observations``: rows ``camera, frame, id, u_px, v_px`` of one frame (distorted pixels);
     cameras not in ``cameras`` are ignored. Outliers are dropped one per point and round, the
-    worst first, until every residual is within ``cfg.max_residual_px``; a point left with fewer
-    than ``cfg.min_rays`` rays is not reported.
+    worst first, until every residual is within ``cfg.max_residual_px`` (each round solves again
+    only the points that lost a ray); a point left with fewer than ``cfg.min_rays`` rays is not
+    reported.
     """
     obs = observations[observations["camera"].isin(list(cameras))].reset_index(drop=True)
+    all_ids, gid = np.unique(obs["id"].to_numpy(), return_inverse=True)
+    xyz = np.full((len(all_ids), 3), np.nan)
+    cov = np.full((len(all_ids), 3, 3), np.nan)
     used = np.ones(len(obs), bool)
     reason = np.full(len(obs), "", object)
     du = np.full(len(obs), np.nan)
     dv = np.full(len(obs), np.nan)
-    while True:
-        counts = obs.loc[used, "id"].value_counts()
-        few = used & (obs["id"].map(counts).fillna(0).to_numpy() < cfg.min_rays)
+    todo = np.ones(len(all_ids), bool)  # points to solve (again): all, then those that lost a ray
+    while todo.any():
+        few = used & (np.bincount(gid[used], minlength=len(all_ids))[gid] < cfg.min_rays)
         reason[few] = f"fewer than {cfg.min_rays} rays"
         used &= ~few
-        idx = np.flatnonzero(used)
-        ids, group, xyz, r, cov = _solve(cameras, obs.iloc[idx], cell, cfg)
+        idx = np.flatnonzero(used & todo[gid])
+        if idx.size == 0:
+            break
+        ids, group, p, r, c = _solve(cameras, obs.iloc[idx], cell, cfg)
+        k = np.searchsorted(all_ids, ids)
+        xyz[k], cov[k] = p, c
         du[idx], dv[idx] = r[:, 0], r[:, 1]
         err = np.hypot(r[:, 0], r[:, 1])
         err = np.where(np.isfinite(err), err, np.inf)
         worst = pd.Series(err).groupby(group).idxmax().to_numpy()
         worst = worst[err[worst] > cfg.max_residual_px]
-        if worst.size == 0:
-            break
         reason[idx[worst]] = np.where(
             np.isfinite(err[worst]), f"residual above {cfg.max_residual_px} px", "does not project"
         )
         used[idx[worst]] = False
-    n_rays = np.bincount(group, minlength=len(ids))
-    e2 = np.bincount(group, weights=err**2, minlength=len(ids))
-    dof = max(2 * len(group) - 3 * len(ids), 1)
-    sigma0 = float(np.sqrt(e2.sum() / dof))
+        todo[:] = False
+        todo[gid[idx[worst]]] = True
+    n_rays = np.bincount(gid[used], minlength=len(all_ids))
+    e2 = np.bincount(gid[used], weights=du[used] ** 2 + dv[used] ** 2, minlength=len(all_ids))
+    solved = n_rays >= cfg.min_rays
+    dof = max(2 * n_rays[solved].sum() - 3 * solved.sum(), 1)
+    sigma0 = float(np.sqrt(e2[solved].sum() / dof))
     # a point whose own rays disagree more than the image noise says so in its uncertainty
     own = np.sqrt(e2 / np.maximum(2 * n_rays - 3, 1))
     points = pd.DataFrame({
-        "id": ids.astype(np.int64), "x_mm": xyz[:, 0], "y_mm": xyz[:, 1], "z_mm": xyz[:, 2],
+        "id": all_ids.astype(np.int64), "x_mm": xyz[:, 0], "y_mm": xyz[:, 1], "z_mm": xyz[:, 2],
         "n_rays": n_rays.astype(np.int64), "rms_px": np.sqrt(e2 / np.maximum(n_rays, 1)),
         "sigma_mm": np.maximum(sigma0, own) * np.sqrt(np.trace(cov, axis1=1, axis2=2)),
-    })  # fmt: skip
+    })[solved]  # fmt: skip
     points = points[np.isfinite(points[["x_mm", "y_mm", "z_mm"]]).all(axis=1)].reset_index(drop=True)
     residuals = obs.assign(du_px=du, dv_px=dv, used=used, reason=reason)
     return WaterTargets(points, residuals, sigma0)
