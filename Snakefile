@@ -22,6 +22,7 @@ include: "workflow/rules/calibrate.smk"
 include: "workflow/rules/frames.smk"
 include: "workflow/rules/identify.smk"
 include: "workflow/rules/reconstruct.smk"
+include: "workflow/rules/track.smk"
 include: "workflow/rules/inventory.smk"
 
 

@@ -131,3 +131,28 @@ RESIDUALS = Schema(
 ``triaxtrack.triangulate``: targets in the water): ``u_px, v_px`` the labelled distorted pixel,
 ``du_px, dv_px`` the reprojection of the reconstructed point minus it (NaN where there is no
 point), ``used`` whether it entered the solution, ``reason`` why not ('' when used)."""
+
+
+TRACKS = Schema(
+    "tracks",
+    {"camera": "object", "frame": "int64", "id": "int64", "u_px": "float64", "v_px": "float64",
+     "area_px": "float64", "reason": "object"},
+    ("camera", "frame", "id"),
+)  # fmt: skip
+"""One camera's targets followed through a chunk (``triaxtrack.track``): one row per target
+labelled at the chunk's first recorded frame, per processed frame of the chunk (and the frame
+the chunk shares with the next one); ``u_px, v_px`` the distorted centroid (NaN where the target
+is not reported), ``area_px`` its blob's area, ``reason`` '' when reported, else why not
+('lost', 'edge', 'merged', 'jump', 'shape', 'ambiguous', 'not_recorded')."""
+
+STRAINS = Schema(
+    "strains",
+    {"frame": "int64", "time_s": "float64", "row": "int64", "col": "int64", "theta_rad": "float64",
+     "z_mm": "float64", "e_zz": "float64", "e_tt": "float64", "e_tz": "float64"},
+    ("frame", "row", "col"),
+)  # fmt: skip
+"""Local Green-Lagrange strain of the membrane, per grid cell (``triaxtrack.volume``): the cell
+between membrane grid rows ``row, row + 1`` and columns ``col, col + 1`` (1-based, Eq. 4),
+``theta_rad, z_mm`` its centre in design (material) coordinates; ``e_zz`` axial (along the
+undeformed generatrix), ``e_tt`` circumferential, ``e_tz`` shear, in the undeformed tangent basis;
+tension positive (the opposite sign to the compression-positive strains of ``volume``)."""

@@ -352,6 +352,64 @@ def get_chunk_labels(wildcards):
     )
 
 
+def _chunk_files(wildcards, pattern):
+    return expand(
+        pattern,
+        test=wildcards.test,
+        camera=get_cameras(wildcards.test),
+        chunk=get_chunks(wildcards.test),
+    )
+
+
+def get_chunk_tracks(wildcards):
+    """The tracks of every camera through one chunk."""
+    return expand(
+        "results/{test}/track/{camera}/{chunk}.parquet",
+        test=wildcards.test,
+        camera=get_cameras(wildcards.test),
+        chunk=wildcards.chunk,
+    )
+
+
+def get_all_tracks(wildcards):
+    """The tracks of every camera and chunk of a test."""
+    return _chunk_files(wildcards, "results/{test}/track/{camera}/{chunk}.parquet")
+
+
+def get_all_handovers(wildcards):
+    """The targets every camera's chunk carried to the next chunk's first frame."""
+    return _chunk_files(
+        wildcards, "results/{test}/track/{camera}/{chunk}_handover.parquet"
+    )
+
+
+def get_timestep_points(wildcards):
+    """The points of every chunk's processed frames."""
+    return expand(
+        "results/{test}/timesteps/{chunk}.parquet",
+        test=wildcards.test,
+        chunk=get_chunks(wildcards.test),
+    )
+
+
+def get_timestep_residuals(wildcards):
+    """The observations (used or not) of every chunk's processed frames."""
+    return expand(
+        "results/{test}/timesteps/{chunk}_residuals.parquet",
+        test=wildcards.test,
+        chunk=get_chunks(wildcards.test),
+    )
+
+
+def get_timestep_motion(wildcards):
+    """The camera-motion check of every chunk."""
+    return expand(
+        "results/{test}/timesteps/{chunk}_motion.parquet",
+        test=wildcards.test,
+        chunk=get_chunks(wildcards.test),
+    )
+
+
 def get_final_outputs():
     """Everything the default target builds: the kit; per simulated test its test folder and
     simulation_check.json; per recorded test its inventory.json; per test and camera its
@@ -398,6 +456,8 @@ def get_final_outputs():
                 "results/{test}/labels.parquet",
                 "results/{test}/cameras.json",
                 "results/{test}/points.parquet",
+                "results/{test}/observations.parquet",
+                "results/{test}/tracking.parquet",
                 "results/{test}/quality.json",
                 "results/{test}/reconstruction/reconstruction.png",
             ],

@@ -44,9 +44,9 @@ rule trace_specimen:
         test_yaml=get_test_yaml,
     output:
         cameras="results/{test}/cameras.json",
-        points="results/{test}/points.parquet",
-        observations="results/{test}/observations.parquet",
-        quality="results/{test}/quality.json",
+        points="results/{test}/reconstruction/points.parquet",
+        observations="results/{test}/reconstruction/observations.parquet",
+        quality="results/{test}/reconstruction/quality.json",
         residuals="results/{test}/reconstruction/residuals.parquet",
         picture="results/{test}/reconstruction/reconstruction.png",
     log:

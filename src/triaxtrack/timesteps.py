@@ -1,0 +1,209 @@
+"""Per-timestep 3-D: every tracked target triangulated at every processed frame (paper 2.4, 3.3).
+
+The cameras and the cell are those of the first frame (``triaxtrack.sfm``,
+``triaxtrack.triangulate``); they are assumed fixed for the whole test, and that is checked:
+the cell-wall targets do not move, so each camera's tracked cell-wall targets must stay on the
+projections of their first-frame 3-D points. A camera whose median drift exceeds
+``moved_px`` at a frame is reported as moved, and its observations of that frame are left out
+of the triangulation (reason ``camera moved``).
+
+Chunks are tracked independently (``triaxtrack.track``); neighbouring chunks share one frame, at
+which the IDs carried to the end of one chunk are compared with the labels of the next
+(:func:`handover_check`).
+
+Units: millimetres in the cell frame, pixels (distorted, OpenCV convention), seconds.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from triaxtrack.optics import Camera, CellOptics, project_air
+from triaxtrack.tables import Schema
+from triaxtrack.triangulate import TriangulationConfig, triangulate_refracted
+
+MOVED_PX = 0.3  # default: a camera whose cell-wall targets drift by more (median) has moved
+MIN_WALL_TARGETS = 5  # fewer tracked cell-wall targets in a frame: the camera cannot be checked
+
+
+def camera_motion(
+    cameras: dict[str, Camera], wall_points: pd.DataFrame, tracks: pd.DataFrame, moved_px: float = MOVED_PX
+) -> pd.DataFrame:
+    """Per camera and frame: the median distance (pixels) of the tracked cell-wall targets from
+    the projections of their first-frame points, and whether the camera has moved.
+
+    ``wall_points``: ``id, x_mm, y_mm, z_mm`` of the cell-wall targets (cell frame, in air);
+    ``tracks``: ``TRACKS`` rows (only reported ones, ``reason == ''``, count). Returns columns
+    ``camera, frame, wall_targets, drift_px, moved``; ``drift_px`` NaN (and ``moved`` False)
+    with fewer than ``MIN_WALL_TARGETS`` targets.
+    """
+    rep = tracks[(tracks["reason"] == "") & tracks["id"].isin(wall_points["id"])]
+    xyz = wall_points.set_index("id")[["x_mm", "y_mm", "z_mm"]]
+    rows = []
+    for (name, frame), g in rep.groupby(["camera", "frame"], sort=True):
+        if name not in cameras:
+            continue
+        uv = project_air(cameras[name], xyz.loc[g["id"]].to_numpy(np.float64))
+        d = np.hypot(*(uv - g[["u_px", "v_px"]].to_numpy(np.float64)).T)
+        d = d[np.isfinite(d)]
+        drift = float(np.median(d)) if len(d) >= MIN_WALL_TARGETS else float("nan")
+        rows.append({"camera": name, "frame": int(frame), "wall_targets": int(len(d)), "drift_px": drift,
+                     "moved": bool(drift > moved_px)})  # fmt: skip
+    cols = ["camera", "frame", "wall_targets", "drift_px", "moved"]
+    return pd.DataFrame(rows, columns=cols)
+
+
+def triangulate_frames(
+    cameras: dict[str, Camera],
+    tracks: pd.DataFrame,
+    cell: CellOptics,
+    in_water: np.ndarray,
+    frames: np.ndarray,
+    fps: float,
+    cfg: TriangulationConfig,
+    motion: pd.DataFrame | None = None,
+) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """Refractive triangulation of the tracked targets in the water, frame by frame.
+
+    ``tracks``: ``TRACKS`` rows of every camera (reported ones are used); ``in_water``: IDs of
+    the pedestal and membrane targets; ``frames``: the frames to solve; ``motion``:
+    :func:`camera_motion` (a moved camera's observations of a frame are left out). Returns
+    ``(points, residuals)``: ``POINTS`` rows plus ``sigma_mm``, and ``RESIDUALS`` rows (every
+    observation offered, whether it was used and why not).
+    """
+    rep = tracks[(tracks["reason"] == "") & tracks["id"].isin(in_water) & tracks["frame"].isin(frames)]
+    moved = set()
+    if motion is not None and len(motion):
+        m = motion[motion["moved"]]
+        moved = set(zip(m["camera"], m["frame"], strict=True))
+    points, residuals = [], []
+    for frame in np.sort(np.asarray(frames)):
+        obs = rep[rep["frame"] == frame][["camera", "frame", "id", "u_px", "v_px"]].reset_index(drop=True)
+        off = np.array([(c, int(frame)) in moved for c in obs["camera"]], bool)
+        if len(obs) == 0:
+            continue
+        res = triangulate_refracted(cameras, obs[~off], cell, cfg)
+        points.append(res.points.assign(frame=int(frame), time_s=float(frame) / fps))
+        dropped = obs[off].assign(du_px=np.nan, dv_px=np.nan, used=False, reason="camera moved")
+        residuals.append(pd.concat([res.residuals, dropped], ignore_index=True))
+    if not points:
+        empty = pd.DataFrame(columns=["frame", "time_s", "id", "x_mm", "y_mm", "z_mm", "n_rays", "rms_px"])
+        return empty, pd.DataFrame(columns=["camera", "frame", "id", "u_px", "v_px", "du_px", "dv_px",
+                                            "used", "reason"])  # fmt: skip
+    return pd.concat(points, ignore_index=True), pd.concat(residuals, ignore_index=True)
+
+
+def handover_check(tracked: pd.DataFrame, labels: pd.DataFrame, tol_px: float = 1.0) -> dict:
+    """Compare the targets one chunk carried to a frame with the next chunk's labels there.
+
+    ``tracked``: ``TRACKS`` rows of one camera at the shared frame; ``labels``: the next chunk's
+    ``LABELS`` rows of that camera and frame. Returns counts: ``both`` (reported by the tracker
+    and labelled), ``agree`` (within ``tol_px``), ``disagree`` (farther: a wrong ID on one side),
+    ``tracked_only``, ``labelled_only``, and the largest distance and the disagreeing IDs.
+    """
+    t = tracked[tracked["reason"] == ""].set_index("id")[["u_px", "v_px"]]
+    lab = labels[labels["id"] > 0].drop_duplicates("id").set_index("id")[["u_px", "v_px"]]
+    common = t.index.intersection(lab.index)
+    d = np.hypot(*(t.loc[common].to_numpy() - lab.loc[common].to_numpy()).T) if len(common) else np.zeros(0)
+    bad = common[d > tol_px]
+    return {
+        "both": int(len(common)),
+        "agree": int((d <= tol_px).sum()),
+        "disagree": int(len(bad)),
+        "disagreeing_ids": [int(i) for i in bad[:20]],
+        "max_distance_px": float(d.max()) if len(d) else float("nan"),
+        "tracked_only": int(len(t.index.difference(lab.index))),
+        "labelled_only": int(len(lab.index.difference(t.index))),
+    }
+
+
+def tracking_summary(tracks: pd.DataFrame) -> pd.DataFrame:
+    """Per camera and frame: targets followed, reported, and dropped by reason (wide table)."""
+    t = tracks.assign(reason=tracks["reason"].replace("", "reported"))
+    out = pd.crosstab([t["camera"], t["frame"]], t["reason"]).reset_index()
+    out.columns.name = None
+    return out
+
+
+MOTION = Schema(
+    "camera_motion",
+    {"camera": "object", "frame": "int64", "wall_targets": "int64", "drift_px": "float64", "moved": "bool"},
+    ("camera", "frame"),
+)
+"""Per camera and frame (:func:`camera_motion`): tracked cell-wall targets, their median distance
+from the projections of their first-frame points, and whether the camera has moved."""
+
+
+def timestep_quality(
+    reference: dict,
+    points: pd.DataFrame,
+    residuals: pd.DataFrame,
+    tracks: pd.DataFrame,
+    motion: pd.DataFrame,
+    handovers: list[dict],
+    membrane_ids: np.ndarray,
+) -> dict:
+    """``quality.json`` of the whole test: the first-frame reconstruction's (``reference``:
+    cell, cell frame, air residuals) with the reprojection errors and counts of every processed
+    frame, the tracking losses, the camera-motion check and the chunk handovers."""
+    used = residuals[residuals["used"].astype(bool)]
+    err = np.hypot(used["du_px"], used["dv_px"])
+    per_camera = {}
+    for name, g in residuals.groupby("camera"):
+        u = g["used"].astype(bool)
+        e = np.hypot(g.loc[u, "du_px"], g.loc[u, "dv_px"])
+        per_camera[str(name)] = {
+            "mean_reprojection_px": float(e.mean()) if len(e) else float("nan"),
+            "observations_used": int(u.sum()),
+            "observations_dropped": int((~u).sum()),
+            "reference_frame": reference.get("per_camera", {}).get(name, {}),
+        }
+    rep = tracks[tracks["reason"] == ""]
+    frames = []
+    for frame, pts in points.groupby("frame"):
+        mem = pts[pts["id"].isin(membrane_ids)]
+        e = err[used["frame"] == frame]
+        frames.append({
+            "frame": int(frame),
+            "time_s": float(pts["time_s"].iloc[0]),
+            "targets_tracked": int(rep.loc[rep["frame"] == frame, "id"].nunique()),
+            "targets_reconstructed": int(len(pts)),
+            "membrane_dots": int(len(membrane_ids)),
+            "membrane_dots_reconstructed": int(len(mem)),
+            "membrane_dots_3_rays": int((mem["n_rays"] >= 3).sum()),
+            "mean_reprojection_px": float(e.mean()) if len(e) else float("nan"),
+            "median_sigma_mm": float(mem["sigma_mm"].median()) if len(mem) else float("nan"),
+        })  # fmt: skip
+    first, last = (points["frame"].min(), points["frame"].max()) if len(points) else (0, 0)
+    mem0 = set(points.loc[(points["frame"] == first) & points["id"].isin(membrane_ids), "id"])
+    mem1 = set(points.loc[(points["frame"] == last) & points["id"].isin(membrane_ids), "id"])
+    losses = tracks.loc[tracks["reason"] != "", "reason"].value_counts()
+    moved = motion[motion["moved"].astype(bool)]
+    return {
+        **{k: v for k, v in reference.items() if k not in ("per_camera", "frames", "mean_reprojection_px")},
+        "mean_reprojection_px": float(err.mean()) if len(err) else float("nan"),
+        "reference_frame": {k: reference.get(k) for k in ("mean_reprojection_px", "frames")},
+        "per_camera": per_camera,
+        "frames": frames,
+        "tracking": {
+            "camera_frames": int(tracks[["camera", "frame"]].drop_duplicates().shape[0]),
+            "observations_reported": int(len(rep)),
+            "observations_dropped": {str(k): int(v) for k, v in losses.items()},
+            "membrane_dots_first_frame": len(mem0),
+            "membrane_dots_kept_to_last_frame": len(mem0 & mem1),
+            "membrane_kept_share": len(mem0 & mem1) / len(mem0) if mem0 else float("nan"),
+        },
+        "camera_motion": {
+            "max_drift_px": float(motion["drift_px"].max()) if len(motion) else float("nan"),
+            "per_camera_max_drift_px": {
+                str(c): float(g.max()) for c, g in motion.groupby("camera")["drift_px"]
+            },
+            "moved": {str(c): int(g["frame"].min()) for c, g in moved.groupby("camera")},
+        },
+        "handovers": {
+            "checked": len(handovers),
+            "disagreements": int(sum(h.get("disagree", 0) for h in handovers)),
+            "details": handovers,
+        },
+    }

@@ -1,0 +1,372 @@
+"""Tracking: follow every labelled target of one camera from frame to frame (paper section 2.4).
+
+The targets are labelled once, in the first recorded frame of a chunk (``triaxtrack.identify``);
+from there each ID is carried forward without detecting or identifying the frame again:
+
+1. **Predict** each target from its recent motion (constant velocity; a target that was not
+   reported in the previous frame moves with its neighbours, see 4).
+2. **Measure** it locally: in a small window around the prediction the dark blob is found by
+   the same rule as :func:`triaxtrack.detect.detect_blobs` (ink: darker than the local white
+   level by ``ink_fraction`` of it and by ``min_contrast``), within a disc of the dot's semi-major
+   axis plus one pixel that is re-centred on the blob (mean shift), and its contrast-weighted centroid
+   is taken over the blob grown by one pixel. The window is the search gate: the nearest
+   detection to the prediction is the blob the disc converges on.
+3. **Check**, and drop for this frame with a reason, never swap:
+
+   * ``edge``: the window leaves the image;
+   * ``lost``: no ink in the disc (occluded, out of view);
+   * ``merged``: the blob runs on beyond its disc (it touches another dark feature);
+   * ``shape``: its area differs from the area at the chunk's first frame by more than
+     ``area_ratio`` (partly hidden or merged), or by more than ``AREA_NOISE sqrt(area)`` for
+     small blobs, whose area jumps by whole pixels;
+   * ``jump``: the centroid is farther than ``gate`` (a fraction of the distance to the nearest
+     other detection at the chunk's first frame) from the prediction;
+   * ``ambiguous``: two targets converge to within ``min_separation`` of that distance (one
+     blob, two candidates): both are dropped;
+   * ``drift``: its displacement since the chunk's first frame departs by more than
+     ``max_flow_residual_px`` from the local affine motion of its neighbours (its own kind:
+     membrane, cell, top or bottom pedestal), which a partly hidden or wrongly followed dot
+     does and a smoothly deforming membrane does not.
+   * ``disagrees``: at the chunk's first frame the tracker's centroid is farther than
+     ``first_agreement_px`` from the identification's (the dot's surroundings confuse one of
+     them): the target is left out of the chunk;
+   * ``not_recorded``: the camera has no picture of the frame (frame map).
+
+4. **Re-acquire**: a dropped target keeps a virtual position, moved by its neighbours' affine
+   motion (or its last velocity when too few neighbours are reported), and is measured again
+   in every later frame; it is reported again as soon as every check passes.
+
+Pixels are distorted image coordinates in OpenCV's convention (the centre of the top-left pixel
+is (0, 0)); frames are test frames (``triaxtrack.frames``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Collection, Iterable
+from dataclasses import dataclass, fields
+
+import numpy as np
+import pandas as pd
+from scipy.spatial import cKDTree
+
+from triaxtrack.detect import DetectParams
+
+NEIGHBOURS = 8  # same-kind neighbours whose motion predicts a target's (local affine flow)
+MIN_FLOW_NEIGHBOURS = 4  # fewer reported neighbours: no flow check, velocity prediction
+MEAN_SHIFT_STEPS = 3  # re-centring steps of the disc; motion left after prediction is sub-pixel
+WHITE_PERCENTILE = 80.0  # the window's white level (dots cover well under 20 % of a window)
+AREA_NOISE = 1.5  # x sqrt(area): the area's frame-to-frame noise of a small blob, pixels
+REASONS = ("edge", "lost", "merged", "shape", "jump", "ambiguous", "drift", "disagrees", "not_recorded")
+
+
+@dataclass(frozen=True)
+class TrackingConfig:
+    """Settings of :func:`track_frames` (config section ``tracking``)."""
+
+    step_s: float | None = None  # processed frames: every frame (None) or one every step_s seconds
+    gate: float = 0.3  # max centroid shift from the prediction, x distance to the nearest detection
+    min_separation: float = 0.5  # two targets closer than this x that distance: ambiguous
+    area_ratio: float = 1.35  # max change of a blob's area from the chunk's first frame (either way)
+    max_flow_residual_px: float = 0.5  # max departure from the neighbours' affine motion, pixels
+    first_agreement_px: float = 0.25  # at the labelled frame: max distance to the detection's centroid
+    disc_margin_px: float = 1.0  # the blob's disc: its semi-major axis plus this, pixels
+    min_contrast: float = DetectParams.min_contrast  # grey levels, as detection
+    ink_fraction: float = DetectParams.ink_fraction  # as detection
+
+    @staticmethod
+    def from_dict(d: dict | None) -> TrackingConfig:
+        names = {f.name for f in fields(TrackingConfig)}
+        return TrackingConfig(**{k: v for k, v in (d or {}).items() if k in names and v is not None})
+
+
+def processed_frames(n_frames: int, fps: float, step_s: float | None) -> np.ndarray:
+    """Test frames that are processed (reported): all, or the nearest frame to every multiple
+    of ``step_s`` seconds; the first and the last frame always."""
+    if n_frames <= 0:
+        return np.zeros(0, np.int64)
+    if step_s is None or step_s <= 0:
+        return np.arange(n_frames, dtype=np.int64)
+    k = np.rint(np.arange(0, (n_frames - 1) / fps + 1e-9, step_s) * fps).astype(np.int64)
+    return np.unique(np.r_[k[k < n_frames], n_frames - 1])
+
+
+def target_kind(ids: np.ndarray) -> np.ndarray:
+    """Kind of a Table 1 ID for the neighbour flow: 0 top pedestal (1-16), 1 bottom pedestal
+    (17-32), 2 cell (101-580), 3 membrane (1001 on)."""
+    ids = np.asarray(ids)
+    return np.select([ids <= 16, ids <= 32, ids < 1000], [0, 1, 2], 3)
+
+
+@dataclass
+class _State:
+    """Per target: the reference (chunk's first frame) and the current estimate."""
+
+    ids: np.ndarray
+    ref_uv: np.ndarray  # (n, 2) centroid at the chunk's first frame (NaN: not measured there)
+    ref_area: np.ndarray  # (n,) blob area there, pixels
+    radius: np.ndarray  # (n,) disc radius, pixels
+    spacing: np.ndarray  # (n,) distance to the nearest other detection at the first frame
+    neighbours: np.ndarray  # (n, NEIGHBOURS) same-kind neighbours (index n: none)
+    uv: np.ndarray  # (n, 2) current estimate (measured or virtual)
+    vel: np.ndarray  # (n, 2) pixels per frame
+    ok: np.ndarray  # (n,) reported in the last frame
+
+
+def _neighbours(uv: np.ndarray, kinds: np.ndarray) -> np.ndarray:
+    n = len(uv)
+    out = np.full((n, NEIGHBOURS), n, np.int64)
+    for kind in np.unique(kinds):
+        idx = np.nonzero(kinds == kind)[0]
+        if len(idx) < 2:
+            continue
+        k = min(NEIGHBOURS + 1, len(idx))
+        _, nb = cKDTree(uv[idx]).query(uv[idx], k=k)
+        nb = idx[nb[:, 1:]]
+        out[idx, : nb.shape[1]] = nb
+    return out
+
+
+def _init_state(labels: pd.DataFrame, cfg: TrackingConfig) -> _State:
+    """State from one frame's labels (all detections: the unlabelled ones give the spacing)."""
+    uv_all = labels[["u_px", "v_px"]].to_numpy(np.float64)
+    own = labels[labels["id"] > 0].drop_duplicates("id").sort_values("id")
+    uv = own[["u_px", "v_px"]].to_numpy(np.float64)
+    ids = own["id"].to_numpy(np.int64)
+    if len(uv_all) >= 2:
+        d, _ = cKDTree(uv_all).query(uv, k=2)
+        spacing = d[:, 1]
+    else:
+        spacing = np.full(len(uv), np.inf)
+    area = np.maximum(own["area_px"].to_numpy(np.float64), 1.0)
+    roundness = np.clip(own["roundness"].to_numpy(np.float64), 0.2, 1.0)
+    radius = np.sqrt(area / (np.pi * roundness)) + cfg.disc_margin_px  # semi-major axis + margin
+    n = len(ids)
+    return _State(
+        ids=ids, ref_uv=np.full((n, 2), np.nan), ref_area=np.full(n, np.nan), radius=radius,
+        spacing=spacing, neighbours=_neighbours(uv, target_kind(ids)), uv=uv.copy(),
+        vel=np.zeros((n, 2)), ok=np.zeros(n, bool),
+    )  # fmt: skip
+
+
+def _dilate(mask: np.ndarray) -> np.ndarray:
+    """3x3 dilation of a stack of (m, h, w) masks (separable: rows, then columns)."""
+    out = mask.copy()
+    out[:, 1:] |= mask[:, :-1]
+    out[:, :-1] |= mask[:, 1:]
+    rows = out.copy()
+    out[:, :, 1:] |= rows[:, :, :-1]
+    out[:, :, :-1] |= rows[:, :, 1:]
+    return out
+
+
+def _dist2(xs: np.ndarray, ys: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """(m, h, w) squared distances of window pixels from (m, 2) window-relative centres."""
+    return (xs - c[:, 0, None, None]) ** 2 + (ys - c[:, 1, None, None]) ** 2
+
+
+def measure_blobs(
+    gray: np.ndarray, uv_px: np.ndarray, radius_px: np.ndarray, cfg: TrackingConfig | None = None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Local centroids of the dark blobs nearest (N, 2) predicted pixel positions.
+
+    ``radius_px`` (N,): the disc that holds a blob (its semi-major axis plus a margin). In a
+    window around each prediction the ink (as detection) near the prediction is re-centred on
+    by mean shift; the blob is then the 8-connected ink grown from its centre within the disc,
+    and its centroid is contrast-weighted over the blob grown by one pixel, other ink excluded
+    (as :func:`triaxtrack.detect.detect_blobs`). Returns ``(uv (N, 2), area (N,), reason (N,)
+    object)``: the centroid, the blob's ink area in pixels, and '' or 'edge' (the window leaves
+    the image), 'lost' (no ink at the centre), 'merged' (the blob runs on beyond its disc);
+    uv is NaN unless the reason is ''.
+    """
+    cfg = cfg or TrackingConfig()
+    g = np.asarray(gray)
+    H, W = g.shape
+    uv_px = np.asarray(uv_px, np.float64).reshape(-1, 2)
+    n = len(uv_px)
+    out = np.full((n, 2), np.nan)
+    area = np.zeros(n)
+    reason = np.full(n, "", dtype=object)
+    finite = np.isfinite(uv_px).all(axis=1)
+    reason[~finite] = "lost"
+    half = np.where(finite, np.ceil(np.nan_to_num(radius_px)).astype(np.int64) + 2, 0)
+    for h in np.unique(half[finite]):
+        sel = np.nonzero(finite & (half == h))[0]
+        cu = np.rint(uv_px[sel, 0]).astype(np.int64)
+        cv = np.rint(uv_px[sel, 1]).astype(np.int64)
+        inside = (cu - h >= 0) & (cv - h >= 0) & (cu + h < W) & (cv + h < H)
+        reason[sel[~inside]] = "edge"
+        sel, cu, cv = sel[inside], cu[inside], cv[inside]
+        if len(sel) == 0:
+            continue
+        m = len(sel)
+        off = np.arange(-h, h + 1)
+        patch = g[(cv[:, None, None] + off[None, :, None]), (cu[:, None, None] + off[None, None, :])]
+        patch = patch.astype(np.float32)
+        white = np.percentile(patch.reshape(m, -1), WHITE_PERCENTILE, axis=1).astype(np.float32)
+        contrast = white[:, None, None] - patch
+        ink = contrast > np.maximum(cfg.min_contrast, cfg.ink_fraction * white)[:, None, None]
+        wts = np.clip(contrast, 0, None)
+        xs = off[None, None, :].astype(np.float64)
+        ys = off[None, :, None].astype(np.float64)
+        c = uv_px[sel] - np.c_[cu, cv]  # prediction relative to the window centre
+
+        core = (radius_px[sel] - cfg.disc_margin_px)[:, None, None] ** 2
+        for _ in range(MEAN_SHIFT_STEPS):  # ink within the blob's own size of the estimate
+            w = wts * (ink & (_dist2(xs, ys, c) <= core))
+            s = w.sum(axis=(1, 2))
+            ok = s > 0
+            c = np.where(ok[:, None], np.c_[(w * xs).sum(axis=(1, 2)), (w * ys).sum(axis=(1, 2))]
+                         / np.where(ok, s, 1)[:, None], c)  # fmt: skip
+        disc = _dist2(xs, ys, c) <= (radius_px[sel] ** 2)[:, None, None]
+        blob = ink & (_dist2(xs, ys, c) <= 2.0)  # the ink at the centre ...
+        for _ in range(int(h) + 1):  # ... grown through connected ink within the disc
+            blob = _dilate(blob) & ink & disc
+        grown = _dilate(blob)
+        runs_on = (grown & ink & ~disc).any(axis=(1, 2))
+        grown &= ~(ink & ~blob)
+        w = wts * grown
+        s = w.sum(axis=(1, 2))
+        npx = blob.sum(axis=(1, 2))
+        r = np.where(npx == 0, "lost", np.where(runs_on, "merged", ""))
+        reason[sel] = r
+        keep = r == ""
+        cen = np.c_[(w * xs).sum(axis=(1, 2)), (w * ys).sum(axis=(1, 2))] / np.where(s > 0, s, 1)[:, None]
+        out[sel[keep]] = cen[keep] + np.c_[cu, cv][keep]
+        area[sel] = npx
+    return out, area, reason
+
+
+def _affine_flow(state: _State, disp: np.ndarray, ok: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each target's displacement predicted by the affine motion of its reported neighbours:
+    ``(pred (n, 2), valid (n,))`` from the displacements ``disp`` (n, 2) of the ``ok`` ones."""
+    n = len(state.ids)
+    nb = state.neighbours
+    pad_ok = np.r_[ok, False]
+    pad_ref = np.vstack([state.ref_uv, np.zeros((1, 2))])
+    pad_disp = np.vstack([np.where(ok[:, None], disp, 0.0), np.zeros((1, 2))])
+    w = pad_ok[nb].astype(np.float64)  # (n, k)
+    dx = np.nan_to_num(pad_ref[nb] - state.ref_uv[:, None, :])  # (n, k, 2)
+    A = np.concatenate([dx, np.ones((n, nb.shape[1], 1))], axis=2)  # (n, k, 3)
+    M = np.einsum("nk,nki,nkj->nij", w, A, A) + 1e-6 * np.eye(3)
+    rhs = np.einsum("nk,nki,nkj->nij", w, A, pad_disp[nb])  # (n, 3, 2)
+    valid = (w.sum(axis=1) >= MIN_FLOW_NEIGHBOURS) & np.isfinite(state.ref_uv).all(axis=1)
+    sol = np.zeros((n, 3, 2))
+    if valid.any():
+        sol[valid] = np.linalg.solve(M[valid], rhs[valid])
+    return sol[:, 2, :], valid
+
+
+def _step(state: _State, gray: np.ndarray | None, cfg: TrackingConfig, first: bool) -> tuple:
+    """Track one frame: returns (uv (n, 2), area (n,), reason (n,)) and advances the state."""
+    n = len(state.ids)
+    if gray is None:
+        state.uv = state.uv + state.vel
+        state.ok = np.zeros(n, bool)
+        return np.full((n, 2), np.nan), np.zeros(n), np.full(n, "not_recorded", dtype=object)
+    pred = state.uv + state.vel
+    uv, area, reason = measure_blobs(gray, pred, state.radius, cfg)
+    if first:  # the tracker's centroid must agree with the detection's, or the target is left out
+        agree = (reason == "") & (np.linalg.norm(uv - pred, axis=1) <= cfg.first_agreement_px)
+        reason[(reason == "") & ~agree] = "disagrees"
+        state.ref_uv = np.where(agree[:, None], uv, np.nan)
+        state.ref_area = np.where(agree, area, np.nan)
+    unmeasurable = ~np.isfinite(state.ref_area)
+    reason[unmeasurable & (reason == "")] = "disagrees"
+    measured = reason == ""
+    # small blobs' areas jump by whole pixels: the tolerance is at least AREA_NOISE sqrt(area)
+    tol = np.maximum((cfg.area_ratio - 1) * state.ref_area, AREA_NOISE * np.sqrt(state.ref_area))
+    bad_shape = measured & ~(np.abs(area - state.ref_area) <= tol)
+    reason[bad_shape] = "shape"
+    jump = measured & (np.linalg.norm(uv - pred, axis=1) > cfg.gate * state.spacing)
+    reason[jump & (reason == "")] = "jump"
+    cand = np.nonzero(reason == "")[0]
+    if len(cand) > 1:
+        pairs = cKDTree(uv[cand]).query_pairs(cfg.min_separation * float(np.min(state.spacing[cand])))
+        for a, b in pairs:
+            i, j = cand[a], cand[b]
+            if np.linalg.norm(uv[i] - uv[j]) < cfg.min_separation * min(state.spacing[i], state.spacing[j]):
+                reason[i] = reason[j] = "ambiguous"
+    ok = reason == ""
+    disp = uv - state.ref_uv
+    flow, valid = _affine_flow(state, disp, ok)
+    drift = ok & valid & (np.linalg.norm(disp - flow, axis=1) > cfg.max_flow_residual_px)
+    reason[drift] = "drift"
+    ok = reason == ""
+    if drift.any():  # the drifting ones must not steer their neighbours' flow
+        flow, valid = _affine_flow(state, disp, ok)
+    virtual = np.where(valid[:, None], state.ref_uv + flow, pred)
+    new_uv = np.where(ok[:, None], uv, virtual)
+    new_uv = np.where(np.isfinite(new_uv), new_uv, pred)
+    state.vel = np.zeros((n, 2)) if first else new_uv - state.uv
+    state.uv = new_uv
+    state.ok = ok
+    return np.where(ok[:, None], uv, np.nan), area, reason
+
+
+def track_frames(
+    frames: Iterable[tuple[int, np.ndarray | None]],
+    labels: pd.DataFrame,
+    camera: str,
+    report: Collection[int],
+    cfg: TrackingConfig | None = None,
+) -> pd.DataFrame:
+    """Follow the labelled targets of ``labels`` (one camera's frame, ``LABELS`` columns; the
+    unlabelled detections, id -1, only set each target's spacing) through ``frames``
+    (``(test frame, grey image or None)`` in order, starting at the labels' frame).
+
+    Returns a ``TRACKS`` table: one row per labelled target per frame in ``report`` (the
+    labels' frame included, re-measured by the tracker so that every frame has the same
+    centroid estimator).
+    """
+    cfg = cfg or TrackingConfig()
+    state = _init_state(labels, cfg)
+    report = set(int(k) for k in report)
+    parts = []
+    for i, (k, gray) in enumerate(frames):
+        uv, area, reason = _step(state, gray, cfg, first=i == 0)
+        if i == 0 and gray is None:
+            raise ValueError(f"{camera}: no picture of the labelled frame {k}")
+        if int(k) in report:
+            parts.append(pd.DataFrame({
+                "camera": camera, "frame": int(k), "id": state.ids, "u_px": uv[:, 0], "v_px": uv[:, 1],
+                "area_px": area, "reason": reason.astype(str),
+            }))  # fmt: skip
+    if not parts:
+        return pd.DataFrame({c: [] for c in ("camera", "frame", "id", "u_px", "v_px", "area_px", "reason")})
+    return pd.concat(parts, ignore_index=True)
+
+
+@dataclass(frozen=True)
+class ChunkPlan:
+    """The frames one camera's chunk decodes and reports."""
+
+    first: int  # the labelled frame (the camera's first recorded frame of the chunk)
+    end: int  # decode frames first..end-1 (the chunk, and the next chunk's first frame)
+    report: np.ndarray  # processed frames of the chunk, and the handover frame
+    handover: int  # the frame shared with the next chunk (-1 for the last chunk)
+
+
+def chunk_frames(
+    labels: pd.DataFrame,
+    fmap: pd.DataFrame,
+    fps: float,
+    chunk: dict,
+    cfg: TrackingConfig,
+    source: str = "labels",
+) -> ChunkPlan:
+    """What a chunk ``{'start', 'stop'}`` (stop exclusive) of a test with frame map ``fmap``
+    tracks, from its ``labels`` (one frame). ValueError naming ``source`` if the labels are of
+    no frame of the chunk."""
+    n = len(fmap)
+    start, stop = int(chunk["start"]), int(chunk["stop"])
+    frames = labels["frame"].unique()
+    if len(frames) != 1 or not start <= int(frames[0]) < stop:
+        raise ValueError(f"{source}: expected the labels of one frame of the chunk {start}..{stop - 1}, "
+                         f"got frames {sorted(int(f) for f in frames)}")  # fmt: skip
+    first = int(frames[0])
+    handover = stop if stop < n else -1
+    proc = processed_frames(n, fps, cfg.step_s)
+    report = proc[(proc >= first) & (proc < stop)]
+    if handover >= 0:
+        report = np.r_[report, handover]
+    return ChunkPlan(first, stop + 1 if handover >= 0 else stop, report, handover)

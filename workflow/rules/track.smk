@@ -1,0 +1,95 @@
+# Tracking and per-timestep 3-D (paper sections 2.4 and 3.3): every labelled target followed
+# through each camera's chunk, then triangulated at every processed frame, chunk by chunk.
+
+
+rule track_targets:
+    """Follow the targets labelled at the chunk's first frame through the chunk (decoded as a
+    stream), and on to the first frame of the next chunk for the handover check."""
+    input:
+        video=get_camera_video,
+        frames="results/{test}/frames/{camera}.parquet",
+        labels="results/{test}/identify/{camera}/{chunk}.parquet",
+        test_yaml=get_test_yaml,
+    output:
+        tracks="results/{test}/track/{camera}/{chunk}.parquet",
+        handover="results/{test}/track/{camera}/{chunk}_handover.parquet",
+    log:
+        "logs/{test}/track_targets/{camera}/{chunk}.log",
+    benchmark:
+        "benchmarks/{test}/track_targets/{camera}/{chunk}.tsv"
+    conda:
+        "../envs/triaxtrack.yaml"
+    threads: 1
+    resources:
+        mem_mb=1500,
+        runtime=30,
+    params:
+        chunk=get_chunk_frames,
+        tracking=config["tracking"],
+    script:
+        "../scripts/track_targets.py"
+
+
+rule triangulate_chunk:
+    """Triangulate every tracked target in the water at every processed frame of one chunk
+    (cameras and cell of the first frame), and check that no camera moved."""
+    input:
+        tracks=get_chunk_tracks,
+        cameras="results/{test}/cameras.json",
+        reference="results/{test}/reconstruction/quality.json",
+        points="results/{test}/reconstruction/points.parquet",
+        kit=get_test_kit,
+        test_yaml=get_test_yaml,
+    output:
+        points="results/{test}/timesteps/{chunk}.parquet",
+        residuals="results/{test}/timesteps/{chunk}_residuals.parquet",
+        motion="results/{test}/timesteps/{chunk}_motion.parquet",
+    log:
+        "logs/{test}/triangulate_chunk/{chunk}.log",
+    benchmark:
+        "benchmarks/{test}/triangulate_chunk/{chunk}.tsv"
+    conda:
+        "../envs/triaxtrack.yaml"
+    threads: 1
+    resources:
+        mem_mb=3000,
+        runtime=60,
+    params:
+        reconstruction=config["reconstruction"],
+        tracking=config["tracking"],
+    script:
+        "../scripts/triangulate_chunk.py"
+
+
+rule collect_timesteps:
+    """All chunks in one test: points.parquet, observations.parquet, tracking.parquet and
+    quality.json (first-frame reconstruction, per-frame counts, camera motion, handovers).
+    """
+    input:
+        points=get_timestep_points,
+        residuals=get_timestep_residuals,
+        motion=get_timestep_motion,
+        tracks=get_all_tracks,
+        handovers=get_all_handovers,
+        labels="results/{test}/labels.parquet",
+        reference="results/{test}/reconstruction/quality.json",
+        kit=get_test_kit,
+    output:
+        points="results/{test}/points.parquet",
+        observations="results/{test}/observations.parquet",
+        tracking="results/{test}/tracking.parquet",
+        quality="results/{test}/quality.json",
+    log:
+        "logs/{test}/collect_timesteps.log",
+    benchmark:
+        "benchmarks/{test}/collect_timesteps.tsv"
+    conda:
+        "../envs/triaxtrack.yaml"
+    threads: 1
+    resources:
+        mem_mb=4000,
+        runtime=20,
+    params:
+        handover_px=config["tracking"]["handover_px"],
+    script:
+        "../scripts/collect_timesteps.py"

@@ -1,0 +1,26 @@
+"""Rule track_targets: follow one camera's labelled targets through one chunk."""
+
+import yaml
+
+from triaxtrack.frames import iter_test_frames
+from triaxtrack.logs import log_to
+from triaxtrack.tables import FRAME_MAP, LABELS, TRACKS, read_table, write_table
+from triaxtrack.timesteps import tracking_summary
+from triaxtrack.track import TrackingConfig, chunk_frames, track_frames
+
+log_to(snakemake.log[0])
+
+cfg = TrackingConfig.from_dict(snakemake.params.tracking)
+fmap = read_table(snakemake.input.frames, FRAME_MAP)
+labels = read_table(snakemake.input.labels, LABELS)
+fps = float(yaml.safe_load(open(snakemake.input.test_yaml))["fps"])
+camera = snakemake.wildcards.camera
+plan = chunk_frames(labels, fmap, fps, snakemake.params.chunk, cfg, snakemake.input.labels)
+frames = iter_test_frames(snakemake.input.video, fmap, plan.first, plan.end)
+tracks = track_frames(frames, labels, camera, plan.report, cfg)
+shared = tracks["frame"] == plan.handover
+write_table(tracks[~shared], snakemake.output.tracks, TRACKS)
+write_table(tracks[shared], snakemake.output.handover, TRACKS)
+summary = tracking_summary(tracks[~shared]).drop(columns=["camera", "frame"])
+print(f"{camera}: {labels['id'].gt(0).sum()} targets labelled at frame {plan.first}; per frame:")
+print(summary.describe().loc[["mean", "min", "max"]].to_string())
