@@ -15,6 +15,9 @@ min_version("8.0")
 configfile: "config/config.yaml"
 
 
+report: "workflow/report/workflow.rst"
+
+
 include: "workflow/rules/common.smk"
 include: "workflow/rules/kit.smk"
 include: "workflow/rules/simulate.smk"
@@ -23,6 +26,8 @@ include: "workflow/rules/frames.smk"
 include: "workflow/rules/identify.smk"
 include: "workflow/rules/reconstruct.smk"
 include: "workflow/rules/track.smk"
+include: "workflow/rules/volume.smk"
+include: "workflow/rules/report.smk"
 include: "workflow/rules/inventory.smk"
 
 

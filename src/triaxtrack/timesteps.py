@@ -207,3 +207,31 @@ def timestep_quality(
             "details": handovers,
         },
     }
+
+
+def handover_checks(shared: pd.DataFrame, labels: pd.DataFrame, tol_px: float = 1.0) -> list[dict]:
+    """:func:`handover_check` of every camera at every frame in ``shared`` (``TRACKS`` rows the
+    chunks carried to their next chunk's first frame) against ``labels`` (``LABELS`` of the
+    chunk starts). A camera whose next labels are of a later frame is listed, not compared."""
+    out = []
+    for (camera, frame), got in shared.groupby(["camera", "frame"]):
+        lab = labels[(labels["camera"] == camera) & (labels["frame"] == frame)]
+        check = {"camera": str(camera), "frame": int(frame)}
+        if lab.empty:
+            check["note"] = "the next chunk's labels are of a later frame: not compared"
+        else:
+            check.update(handover_check(got, lab, tol_px))
+        out.append(check)
+    return out
+
+
+def observations_table(tracks: pd.DataFrame, residuals: pd.DataFrame) -> pd.DataFrame:
+    """``OBSERVATIONS`` of the whole test: every reported tracked target (cell wall too), with
+    its reprojection residual ``du_px, dv_px`` where it was offered to the triangulation, ``used``
+    (it entered a 3-D point) and ``reason`` (why not; '' when used or not in the water)."""
+    res = residuals[["camera", "frame", "id", "du_px", "dv_px", "used", "reason"]]
+    obs = tracks.loc[tracks["reason"] == "", ["camera", "frame", "id", "u_px", "v_px"]]
+    out = obs.merge(res, on=["camera", "frame", "id"], how="left")
+    out["used"] = out["used"].astype("boolean").fillna(False).astype(bool)
+    out["reason"] = out["reason"].fillna("").astype(str)
+    return out

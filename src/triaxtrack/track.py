@@ -16,9 +16,10 @@ from there each ID is carried forward without detecting or identifying the frame
    * ``edge``: the window leaves the image;
    * ``lost``: no ink in the disc (occluded, out of view);
    * ``merged``: the blob runs on beyond its disc (it touches another dark feature);
-   * ``shape``: its area differs from the area at the chunk's first frame by more than
-     ``area_ratio`` (partly hidden or merged), or by more than ``AREA_NOISE sqrt(area)`` for
-     small blobs, whose area jumps by whole pixels;
+   * ``shape``: its mass (the summed contrast: the dot's area times its darkness, without the
+     whole-pixel jumps of a thresholded area) changed by more than ``mass_step`` since it was
+     last seen, or by more than ``mass_change`` since the chunk's first frame (partly hidden,
+     or merged with another dark feature);
    * ``jump``: the centroid is farther than ``gate`` (a fraction of the distance to the nearest
      other detection at the chunk's first frame) from the prediction;
    * ``ambiguous``: two targets converge to within ``min_separation`` of that distance (one
@@ -33,8 +34,10 @@ from there each ID is carried forward without detecting or identifying the frame
    * ``not_recorded``: the camera has no picture of the frame (frame map).
 
 4. **Re-acquire**: a dropped target keeps a virtual position, moved by its neighbours' affine
-   motion (or its last velocity when too few neighbours are reported), and is measured again
-   in every later frame; it is reported again as soon as every check passes.
+   motion (or by its last velocity when too few neighbours are reported), and is measured again
+   in every later frame; it is reported again as soon as every check passes. After more than
+   ``MAX_BLIND_FRAMES`` frames unseen it also needs enough reported neighbours to pass the
+   ``drift`` check (else ``unconfirmed``): a position extrapolated blind is not trusted.
 
 Pixels are distorted image coordinates in OpenCV's convention (the centre of the top-left pixel
 is (0, 0)); frames are test frames (``triaxtrack.frames``).
@@ -51,12 +54,16 @@ from scipy.spatial import cKDTree
 
 from triaxtrack.detect import DetectParams
 
-NEIGHBOURS = 8  # same-kind neighbours whose motion predicts a target's (local affine flow)
+NEIGHBOURS = 12  # same-kind neighbours whose motion predicts a target's (local affine flow)
 MIN_FLOW_NEIGHBOURS = 4  # fewer reported neighbours: no flow check, velocity prediction
 MEAN_SHIFT_STEPS = 3  # re-centring steps of the disc; motion left after prediction is sub-pixel
 WHITE_PERCENTILE = 80.0  # the window's white level (dots cover well under 20 % of a window)
-AREA_NOISE = 1.5  # x sqrt(area): the area's frame-to-frame noise of a small blob, pixels
-REASONS = ("edge", "lost", "merged", "shape", "jump", "ambiguous", "drift", "disagrees", "not_recorded")
+VELOCITY_SMOOTHING = 0.5  # weight of the previous velocity (one noisy or biased frame moves it less)
+MAX_BLIND_FRAMES = 2  # a target found again after longer needs its neighbours' motion to confirm it
+REASONS = (
+    "edge", "lost", "merged", "shape", "jump", "ambiguous", "drift", "unconfirmed", "disagrees",
+    "not_recorded",
+)  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -66,7 +73,8 @@ class TrackingConfig:
     step_s: float | None = None  # processed frames: every frame (None) or one every step_s seconds
     gate: float = 0.3  # max centroid shift from the prediction, x distance to the nearest detection
     min_separation: float = 0.5  # two targets closer than this x that distance: ambiguous
-    area_ratio: float = 1.35  # max change of a blob's area from the chunk's first frame (either way)
+    mass_change: float = 0.25  # max relative change of a blob's mass from the chunk's first frame
+    mass_step: float = 0.1  # max relative change of a blob's mass from the frame it was last seen
     max_flow_residual_px: float = 0.5  # max departure from the neighbours' affine motion, pixels
     first_agreement_px: float = 0.25  # at the labelled frame: max distance to the detection's centroid
     disc_margin_px: float = 1.0  # the blob's disc: its semi-major axis plus this, pixels
@@ -103,13 +111,15 @@ class _State:
 
     ids: np.ndarray
     ref_uv: np.ndarray  # (n, 2) centroid at the chunk's first frame (NaN: not measured there)
-    ref_area: np.ndarray  # (n,) blob area there, pixels
+    ref_mass: np.ndarray  # (n,) blob mass there (summed contrast)
+    last_mass: np.ndarray  # (n,) blob mass when last reported
     radius: np.ndarray  # (n,) disc radius, pixels
     spacing: np.ndarray  # (n,) distance to the nearest other detection at the first frame
     neighbours: np.ndarray  # (n, NEIGHBOURS) same-kind neighbours (index n: none)
-    uv: np.ndarray  # (n, 2) current estimate (measured or virtual)
-    vel: np.ndarray  # (n, 2) pixels per frame
-    ok: np.ndarray  # (n,) reported in the last frame
+    pred: np.ndarray  # (n, 2) where each target is expected in the next frame
+    last_uv: np.ndarray  # (n, 2) where it was last reported
+    last_vel: np.ndarray  # (n, 2) its velocity then, pixels per frame
+    blind: np.ndarray  # (n,) frames since it was last reported
 
 
 def _neighbours(uv: np.ndarray, kinds: np.ndarray) -> np.ndarray:
@@ -142,9 +152,10 @@ def _init_state(labels: pd.DataFrame, cfg: TrackingConfig) -> _State:
     radius = np.sqrt(area / (np.pi * roundness)) + cfg.disc_margin_px  # semi-major axis + margin
     n = len(ids)
     return _State(
-        ids=ids, ref_uv=np.full((n, 2), np.nan), ref_area=np.full(n, np.nan), radius=radius,
-        spacing=spacing, neighbours=_neighbours(uv, target_kind(ids)), uv=uv.copy(),
-        vel=np.zeros((n, 2)), ok=np.zeros(n, bool),
+        ids=ids, ref_uv=np.full((n, 2), np.nan), ref_mass=np.full(n, np.nan),
+        last_mass=np.full(n, np.nan), radius=radius,
+        spacing=spacing, neighbours=_neighbours(uv, target_kind(ids)), pred=uv.copy(), last_uv=uv.copy(),
+        last_vel=np.zeros((n, 2)), blind=np.zeros(n, np.int64),
     )  # fmt: skip
 
 
@@ -166,7 +177,7 @@ def _dist2(xs: np.ndarray, ys: np.ndarray, c: np.ndarray) -> np.ndarray:
 
 def measure_blobs(
     gray: np.ndarray, uv_px: np.ndarray, radius_px: np.ndarray, cfg: TrackingConfig | None = None
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Local centroids of the dark blobs nearest (N, 2) predicted pixel positions.
 
     ``radius_px`` (N,): the disc that holds a blob (its semi-major axis plus a margin). In a
@@ -174,7 +185,9 @@ def measure_blobs(
     by mean shift; the blob is then the 8-connected ink grown from its centre within the disc,
     and its centroid is contrast-weighted over the blob grown by one pixel, other ink excluded
     (as :func:`triaxtrack.detect.detect_blobs`). Returns ``(uv (N, 2), area (N,), reason (N,)
-    object)``: the centroid, the blob's ink area in pixels, and '' or 'edge' (the window leaves
+    object)``: the centroid, the blob's ink area in pixels, its mass (the summed contrast
+    weights, grey levels x pixels: unlike the area it does not jump by whole pixels), and '' or
+    'edge' (the window leaves
     the image), 'lost' (no ink at the centre), 'merged' (the blob runs on beyond its disc);
     uv is NaN unless the reason is ''.
     """
@@ -185,6 +198,7 @@ def measure_blobs(
     n = len(uv_px)
     out = np.full((n, 2), np.nan)
     area = np.zeros(n)
+    mass = np.zeros(n)
     reason = np.full(n, "", dtype=object)
     finite = np.isfinite(uv_px).all(axis=1)
     reason[~finite] = "lost"
@@ -233,7 +247,8 @@ def measure_blobs(
         cen = np.c_[(w * xs).sum(axis=(1, 2)), (w * ys).sum(axis=(1, 2))] / np.where(s > 0, s, 1)[:, None]
         out[sel[keep]] = cen[keep] + np.c_[cu, cv][keep]
         area[sel] = npx
-    return out, area, reason
+        mass[sel] = s
+    return out, area, mass, reason
 
 
 def _affine_flow(state: _State, disp: np.ndarray, ok: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -260,22 +275,23 @@ def _step(state: _State, gray: np.ndarray | None, cfg: TrackingConfig, first: bo
     """Track one frame: returns (uv (n, 2), area (n,), reason (n,)) and advances the state."""
     n = len(state.ids)
     if gray is None:
-        state.uv = state.uv + state.vel
-        state.ok = np.zeros(n, bool)
+        state.pred = state.pred + state.last_vel
+        state.blind = state.blind + 1
         return np.full((n, 2), np.nan), np.zeros(n), np.full(n, "not_recorded", dtype=object)
-    pred = state.uv + state.vel
-    uv, area, reason = measure_blobs(gray, pred, state.radius, cfg)
+    pred = state.pred
+    uv, area, mass, reason = measure_blobs(gray, pred, state.radius, cfg)
     if first:  # the tracker's centroid must agree with the detection's, or the target is left out
         agree = (reason == "") & (np.linalg.norm(uv - pred, axis=1) <= cfg.first_agreement_px)
         reason[(reason == "") & ~agree] = "disagrees"
         state.ref_uv = np.where(agree[:, None], uv, np.nan)
-        state.ref_area = np.where(agree, area, np.nan)
-    unmeasurable = ~np.isfinite(state.ref_area)
+        state.ref_mass = np.where(agree, mass, np.nan)
+        state.last_mass = state.ref_mass
+    unmeasurable = ~np.isfinite(state.ref_mass)
     reason[unmeasurable & (reason == "")] = "disagrees"
     measured = reason == ""
-    # small blobs' areas jump by whole pixels: the tolerance is at least AREA_NOISE sqrt(area)
-    tol = np.maximum((cfg.area_ratio - 1) * state.ref_area, AREA_NOISE * np.sqrt(state.ref_area))
-    bad_shape = measured & ~(np.abs(area - state.ref_area) <= tol)
+    change = np.abs(mass / state.ref_mass - 1)
+    step = np.abs(mass / state.last_mass - 1)
+    bad_shape = measured & ~((change <= cfg.mass_change) & (step <= cfg.mass_step))
     reason[bad_shape] = "shape"
     jump = measured & (np.linalg.norm(uv - pred, axis=1) > cfg.gate * state.spacing)
     reason[jump & (reason == "")] = "jump"
@@ -291,15 +307,25 @@ def _step(state: _State, gray: np.ndarray | None, cfg: TrackingConfig, first: bo
     flow, valid = _affine_flow(state, disp, ok)
     drift = ok & valid & (np.linalg.norm(disp - flow, axis=1) > cfg.max_flow_residual_px)
     reason[drift] = "drift"
+    # found again after more than MAX_BLIND_FRAMES, where no neighbours can vouch for it
+    unconfirmed = (reason == "") & ~valid & (state.blind > MAX_BLIND_FRAMES)
+    reason[unconfirmed] = "unconfirmed"
     ok = reason == ""
-    if drift.any():  # the drifting ones must not steer their neighbours' flow
+    if (drift | unconfirmed).any():  # they must not steer their neighbours' flow
         flow, valid = _affine_flow(state, disp, ok)
-    virtual = np.where(valid[:, None], state.ref_uv + flow, pred)
-    new_uv = np.where(ok[:, None], uv, virtual)
-    new_uv = np.where(np.isfinite(new_uv), new_uv, pred)
-    state.vel = np.zeros((n, 2)) if first else new_uv - state.uv
-    state.uv = new_uv
-    state.ok = ok
+    steady = ok & (state.blind == 0)
+    vel = VELOCITY_SMOOTHING * state.last_vel + (1 - VELOCITY_SMOOTHING) * (uv - state.last_uv)
+    state.last_vel = np.where(steady[:, None], vel, state.last_vel)
+    state.last_uv = np.where(ok[:, None], uv, state.last_uv)
+    state.last_mass = np.where(ok, mass, state.last_mass)
+    state.blind = np.where(ok, 0, state.blind + 1)
+    if first:
+        state.last_vel = np.zeros((n, 2))
+    # next frame: constant velocity; a dropped target moves with its neighbours, or else blind
+    blind_pred = state.last_uv + state.last_vel * (state.blind + 1)[:, None]
+    virtual = np.where(valid[:, None], state.ref_uv + flow, blind_pred)
+    virtual = np.where(np.isfinite(virtual), virtual, blind_pred)
+    state.pred = np.where(ok[:, None], uv + state.last_vel, virtual)
     return np.where(ok[:, None], uv, np.nan), area, reason
 
 

@@ -16,7 +16,7 @@ from triaxtrack.tables import (
     read_table,
     write_table,
 )
-from triaxtrack.timesteps import MOTION, handover_check, timestep_quality
+from triaxtrack.timesteps import MOTION, handover_checks, observations_table, timestep_quality
 
 log_to(snakemake.log[0])
 
@@ -26,35 +26,17 @@ points = concat_tables(snakemake.input.points, POINTS)
 residuals = concat_tables(snakemake.input.residuals, RESIDUALS)
 motion = concat_tables(snakemake.input.motion, MOTION)
 tracks = concat_tables(snakemake.input.tracks, TRACKS)
-labels = read_table(snakemake.input.labels, LABELS)
+shared = concat_tables(snakemake.input.handovers, TRACKS)
+handovers = handover_checks(shared, read_table(snakemake.input.labels, LABELS), snakemake.params.handover_px)
 reference = json.load(open(snakemake.input.reference))
-tol = snakemake.params.handover_px
-
-handovers = []
-for path in snakemake.input.handovers:
-    shared = read_table(path, TRACKS)
-    for (camera, frame), got in shared.groupby(["camera", "frame"]):
-        lab = labels[(labels["camera"] == camera) & (labels["frame"] == frame)]
-        check = {"camera": camera, "frame": int(frame), "source": str(path)}
-        if lab.empty:
-            check["note"] = "the next chunk's labels are of a later frame: not compared"
-        else:
-            check.update(handover_check(got, lab, tol))
-        handovers.append(check)
-
-observations = tracks[tracks["reason"] == ""].merge(
-    residuals[["camera", "frame", "id", "du_px", "dv_px", "used", "reason"]].rename(columns={"reason": "reason_3d"}),
-    on=["camera", "frame", "id"], how="left",
-)  # fmt: skip
-observations["used"] = observations["used"].astype("boolean").fillna(False).astype(bool)
-observations = observations.drop(columns=["reason"]).rename(columns={"reason_3d": "reason"}).fillna({"reason": ""})
 quality = timestep_quality(reference, points, residuals, tracks, motion, handovers, membrane_ids)
 
 write_table(points, snakemake.output.points, POINTS)
-write_table(observations, snakemake.output.observations, OBSERVATIONS)
+write_table(observations_table(tracks, residuals), snakemake.output.observations, OBSERVATIONS)
 write_table(tracks, snakemake.output.tracking, TRACKS)
 with open(snakemake.output.quality, "w") as f:
     json.dump(quality, f, indent=2)
 print(json.dumps({k: quality[k] for k in ("mean_reprojection_px", "tracking", "camera_motion")}, indent=2))
 print(pd.DataFrame(quality["frames"]).describe().to_string())
-print(f"handovers: {quality['handovers']['checked']} checked, {quality['handovers']['disagreements']} disagreements")
+h = quality["handovers"]
+print(f"handovers: {h['checked']} checked, {h['disagreements']} disagreements")

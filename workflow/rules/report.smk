@@ -1,0 +1,103 @@
+# Figures and a movie for Snakemake's HTML report: `snakemake --report report.html` after a run.
+#
+# Wire-up in the Snakefile (after `configfile:`), the global report page and this file:
+#
+#     report: "workflow/report/workflow.rst"
+#     include: "workflow/rules/report.smk"
+#
+# Config keys (config["report"]): strain_map_frames, movie_fps, movie_max_frames,
+# movie_colour_by, movie_magnify, movie_height_px (see config/README.md).
+#
+# Snakemake's report shows PNG, SVG, JPEG inline and HTML and PDF in a frame; any other file,
+# an MP4 included, is only a download button. So specimen_movie also writes specimen.html, a
+# page that plays the embedded MP4: it is what plays inline in the report.
+
+
+rule report_figures:
+    """Volume and strains against time, local strain maps at a few times, reprojection error
+    per camera and tracking losses of one test, as PNG figures for the report.
+    """
+    input:
+        volume="results/{test}/volume.parquet",
+        strains="results/{test}/strains.parquet",
+        quality="results/{test}/quality.json",
+        tracking="results/{test}/tracking.parquet",
+    output:
+        volume_strain=report(
+            "results/{test}/report/volume_strain.png",
+            caption="../report/volume_strain.rst",
+            category="{test}",
+            subcategory="1 volume and strain",
+        ),
+        strain_maps=report(
+            "results/{test}/report/strain_maps.png",
+            caption="../report/strain_maps.rst",
+            category="{test}",
+            subcategory="2 strain maps",
+        ),
+        reprojection=report(
+            "results/{test}/report/reprojection.png",
+            caption="../report/reprojection.rst",
+            category="{test}",
+            subcategory="4 reconstruction quality",
+        ),
+        tracking=report(
+            "results/{test}/report/tracking.png",
+            caption="../report/tracking.rst",
+            category="{test}",
+            subcategory="5 tracking",
+        ),
+    log:
+        "logs/{test}/report_figures.log",
+    benchmark:
+        "benchmarks/{test}/report_figures.tsv"
+    conda:
+        "../envs/triaxtrack.yaml"
+    threads: 1
+    resources:
+        mem_mb=4000,  # tracking.parquet: one row per camera, target and frame
+        runtime=20,
+    params:
+        strain_map_frames=config["report"]["strain_map_frames"],
+    script:
+        "../scripts/report_figures.py"
+
+
+rule specimen_movie:
+    """The deforming specimen seen from two opposite sides, coloured by radial displacement or
+    local strain, as an H.264 MP4 and an HTML page that plays it.
+    """
+    input:
+        points="results/{test}/points.parquet",
+        strains="results/{test}/strains.parquet",
+    output:
+        movie=report(
+            "results/{test}/report/specimen.mp4",
+            caption="../report/specimen_movie.rst",
+            category="{test}",
+            subcategory="3 movie",
+        ),
+        player=report(
+            "results/{test}/report/specimen.html",
+            caption="../report/specimen_player.rst",
+            category="{test}",
+            subcategory="3 movie",
+        ),
+    log:
+        "logs/{test}/specimen_movie.log",
+    benchmark:
+        "benchmarks/{test}/specimen_movie.tsv"
+    conda:
+        "../envs/triaxtrack.yaml"
+    threads: 1
+    resources:
+        mem_mb=3000,
+        runtime=30,
+    params:
+        fps=config["report"]["movie_fps"],
+        max_frames=config["report"]["movie_max_frames"],
+        colour_by=config["report"]["movie_colour_by"],
+        magnify=config["report"]["movie_magnify"],
+        height_px=config["report"]["movie_height_px"],
+    script:
+        "../scripts/specimen_movie.py"

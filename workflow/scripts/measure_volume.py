@@ -1,0 +1,32 @@
+"""Rule measure_volume: soil volume and strains of every processed frame, meshes of a few."""
+
+from pathlib import Path
+
+from triaxtrack.kit import load_kit_design, target_table
+from triaxtrack.logs import log_to
+from triaxtrack.report import chosen_frames
+from triaxtrack.tables import POINTS, STRAINS, VOLUME, read_table, write_table
+from triaxtrack.volume import volume_meshes, volume_series
+
+log_to(snakemake.log[0])
+
+cfg = snakemake.params.volume
+design = load_kit_design(snakemake.input.kit)
+table = target_table(design)
+points = read_table(snakemake.input.points, POINTS)
+volume, strains = volume_series(
+    points, table, design, t0=cfg["membrane_thickness_mm"], max_missing_share=cfg["max_missing_share"],
+    thickness_model=cfg["thickness_model"],
+)  # fmt: skip
+write_table(volume, snakemake.output.volume, VOLUME)
+write_table(strains, snakemake.output.strains, STRAINS)
+good = volume.loc[volume["reason"] == "", "frame"].tolist()
+out = Path(snakemake.output.meshes)
+out.mkdir(parents=True, exist_ok=True)
+for frame, path in volume_meshes(points, table, design, chosen_frames(good, cfg["mesh_frames"]), out,
+                                 t0=cfg["membrane_thickness_mm"], thickness_model=cfg["thickness_model"]):  # fmt: skip
+    print(f"frame {frame}: {path}")
+print(volume.drop(columns=["reason"]).describe().T.to_string())
+failed = volume[volume["reason"] != ""]
+if len(failed):
+    print(f"{len(failed)} frames failed:\n{failed[['frame', 'reason']].to_string(index=False)}")
