@@ -161,8 +161,8 @@ def test_a_moved_camera_is_found():
     rows = []
     for frame in range(4):
         shift = 0.0 if frame < 2 else 0.8  # the camera is knocked between frames 1 and 2
-        rows.append(pd.DataFrame({"camera": "cam01", "frame": frame, "id": wall["id"], "u_px": uv[:, 0] + shift,
-                                  "v_px": uv[:, 1], "area_px": 9.0, "reason": ""}))  # fmt: skip
+        seen = {"u_px": uv[:, 0] + shift, "v_px": uv[:, 1], "area_px": 9.0, "reason": ""}
+        rows.append(pd.DataFrame({"camera": "cam01", "frame": frame, "id": wall["id"], **seen}))
     motion = camera_motion({"cam01": cam}, wall, pd.concat(rows), moved_px=0.3)
     assert motion["moved"].tolist() == [False, False, True, True]
     assert motion["drift_px"].iloc[0] < 1e-6 and motion["drift_px"].iloc[3] == pytest.approx(0.8, abs=1e-6)

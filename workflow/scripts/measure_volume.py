@@ -14,17 +14,18 @@ cfg = snakemake.params.volume
 design = load_kit_design(snakemake.input.kit)
 table = target_table(design)
 points = read_table(snakemake.input.points, POINTS)
+t0, model = cfg["membrane_thickness_mm"], cfg["thickness_model"]
 volume, strains = volume_series(
-    points, table, design, t0=cfg["membrane_thickness_mm"], max_missing_share=cfg["max_missing_share"],
-    thickness_model=cfg["thickness_model"],
-)  # fmt: skip
+    points, table, design, t0=t0, max_missing_share=cfg["max_missing_share"], thickness_model=model
+)
 write_table(volume, snakemake.output.volume, VOLUME)
 write_table(strains, snakemake.output.strains, STRAINS)
 good = volume.loc[volume["reason"] == "", "frame"].tolist()
 out = Path(snakemake.output.meshes)
 out.mkdir(parents=True, exist_ok=True)
-for frame, path in volume_meshes(points, table, design, chosen_frames(good, cfg["mesh_frames"]), out,
-                                 t0=cfg["membrane_thickness_mm"], thickness_model=cfg["thickness_model"]):  # fmt: skip
+chosen = chosen_frames(good, cfg["mesh_frames"])
+meshes = volume_meshes(points, table, design, chosen, out, t0=t0, thickness_model=model)
+for frame, path in meshes:
     print(f"frame {frame}: {path}")
 print(volume.drop(columns=["reason"]).describe().T.to_string())
 failed = volume[volume["reason"] != ""]
