@@ -88,8 +88,11 @@ def test_default_config_is_demo_13_cameras_2_chunks():
     assert counts["simulate_scene"] == counts["simulate_truth"] == counts["check_simulation"] == 1
     assert counts["make_kit"] == 1
     assert counts["calibrate_camera"] == counts["frame_map"] == 13
-    assert counts["identify_targets"] == 13 * 2
+    assert counts["identify_targets"] == counts["track_targets"] == 13 * 2
     assert counts["collect_labels"] == counts["reconstruct_cell"] == counts["trace_specimen"] == 1
+    assert counts["triangulate_chunk"] == 2  # per chunk, all cameras
+    assert counts["collect_timesteps"] == counts["measure_volume"] == 1
+    assert counts["report_figures"] == counts["specimen_movie"] == 1
 
 
 def test_simulated_jobs_are_cameras_times_chunks(tmp_path):
@@ -145,8 +148,10 @@ def test_simulated_and_recorded_tests_together(tmp_path):
     assert counts["render_video_chunk"] == 4 * 3
     assert counts["probe_video"] == 3
     assert counts["calibrate_camera"] == counts["frame_map"] == 4 + 3
-    assert counts["identify_targets"] == 4 * 3 + 3 * 2  # per camera and chunk
+    assert counts["identify_targets"] == counts["track_targets"] == 4 * 3 + 3 * 2  # per camera and chunk
+    assert counts["triangulate_chunk"] == 3 + 2
     assert counts["collect_labels"] == counts["reconstruct_cell"] == counts["trace_specimen"] == 2
+    assert counts["measure_volume"] == counts["report_figures"] == 2
 
 
 def test_invalid_test_yaml_names_the_file(tmp_path):
@@ -202,9 +207,10 @@ def test_snakefmt_is_clean():
 
 
 def test_small_simulation_end_to_end_then_inventory(tmp_path):
-    """Simulate a small test in a copy of the workflow and measure it: 13 cameras x 2 frames at
-    1280 x 720 (one chunk of 2 frames), 8 board images each; then take its folder as a recorded
-    test and build its inventory. About 60 s on 2 cores."""
+    """Simulate a small test in a copy of the workflow and measure it: 13 cameras x 6 frames at
+    1280 x 720 (two chunks of 3 frames, 1 % axial strain), 8 board images each, tracked,
+    triangulated, meshed and reported; then take its folder as a recorded test and build its
+    inventory. About 2 minutes on 2 cores."""
     from triaxtrack.score import score
 
     work = tmp_path / "work"
@@ -214,12 +220,13 @@ def test_small_simulation_end_to_end_then_inventory(tmp_path):
     shutil.copytree(REPO / "config", work / "config")
     config = write_yaml(
         work / "small.yaml",
-        {"chunk_size": 2, "tests": [{"name": "small", "simulate": {"frames": 2, "calibration_images": 8}}]},
-    )
+        {"chunk_size": 3, "tests": [{"name": "small", "simulate": {"frames": 6, "calibration_images": 8,
+                                                                    "axial_strain": 0.01}}]},
+    )  # fmt: skip
     proc = run_snakemake("--cores", "2", "--configfile", str(config), workdir=work)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     counts = job_counts(proc.stdout + proc.stderr)
-    assert counts["render_video_chunk"] == counts["identify_targets"] == 13
+    assert counts["render_video_chunk"] == counts["identify_targets"] == counts["track_targets"] == 13 * 2
     assert counts["reconstruct_cell"] == counts["trace_specimen"] == 1
     results = work / "results" / "small"
     test_dir = results / "simulated"
@@ -230,9 +237,9 @@ def test_small_simulation_end_to_end_then_inventory(tmp_path):
         calibration = json.loads((results / "calibration" / f"{camera}.json").read_text())
         assert (calibration["camera"], calibration["width"], calibration["n_images"]) == (camera, 1280, 8)
         frames = pd.read_parquet(results / "frames" / f"{camera}.parquet")
-        assert frames.video_index.tolist() == [0, 1] and not frames.missing.any()
+        assert frames.video_index.tolist() == list(range(6)) and not frames.missing.any()
     check = json.loads((results / "simulation_check.json").read_text())
-    assert check["frames_expected"] == 2
+    assert check["frames_expected"] == 6
     assert not list((results / "sim_chunks").rglob("*.mp4"))  # temp()
     quality = json.loads((results / "quality.json").read_text())
     assert quality["cameras_dropped"] == {} and len(quality["per_camera"]) == 13
@@ -240,8 +247,18 @@ def test_small_simulation_end_to_end_then_inventory(tmp_path):
     scores = score(results, test_dir).set_index(["metric", "item"])
     # identification is scored in tests/test_identify.py (2 or 3 centroids just over 1 px here)
     for metric in ("camera_center_error", "camera_rotation_error", "mean_reprojection", "membrane_rms_error",
-                   "membrane_3_rays"):  # fmt: skip
+                   "membrane_3_rays", "id_swaps", "membrane_kept", "volume_error", "volume_change_error",
+                   "axial_strain_error", "frames_measured"):  # fmt: skip
         assert scores.loc[metric, "passed"].all(), scores.loc[metric]
+    assert quality["handovers"]["checked"] == 13 and quality["handovers"]["disagreements"] == 0
+    assert quality["camera_motion"]["moved"] == {}
+    assert pd.read_parquet(results / "points.parquet")["frame"].nunique() == 6
+    assert len(list((results / "mesh").glob("frame_*.ply"))) == 3
+    for name in ("volume_strain.png", "strain_maps.png", "reprojection.png", "tracking.png", "specimen.mp4"):
+        assert (results / "report" / name).stat().st_size > 0
+    proc = run_snakemake("--configfile", str(config), "--report", "report.html", workdir=work)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert (work / "report.html").stat().st_size > 100_000
 
     proc = run_snakemake(
         "results/small/inventory.json", "--cores", "2", "--configfile", str(config),
@@ -250,4 +267,4 @@ def test_small_simulation_end_to_end_then_inventory(tmp_path):
     assert proc.returncode == 0, proc.stdout + proc.stderr
     inventory = json.loads((results / "inventory.json").read_text())
     assert [c["camera"] for c in inventory["cameras"]][:2] == ["cam01", "cam02"]
-    assert inventory["frames"] == 2 and inventory["frame_count_differs"] == []
+    assert inventory["frames"] == 6 and inventory["frame_count_differs"] == []

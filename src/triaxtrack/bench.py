@@ -1,17 +1,42 @@
-"""Benchmarks that print figures (they assert nothing): ``python -m triaxtrack.bench``.
+"""Benchmarks that print figures (they assert nothing): ``python -m triaxtrack.bench [what ...]``.
 
-``simulate``: seconds per camera-frame to render and encode a simulated test at a given size.
-``identify``: seconds to detect and label every target of one frame (one core), per size, with
-the number of targets labelled (frames rendered by the simulator, exact truth cameras).
+``tracking`` (the default): one camera of a simulated test is rendered at ``--size`` (default
+3840x2160) for ``--frames`` frames (default 24) and written as H.264 (the simulation defaults:
+crf 14, veryfast), and on that one video this prints
+
+* the decode-only frame rate (decoding to grey frames as the pipeline does,
+  :func:`triaxtrack.frames.iter_test_frames`), and the whole pipeline's (decoding and
+  :func:`triaxtrack.track.track_frames` on the same stream, from the first frame's labels of
+  :func:`triaxtrack.identify.label_frame`), and their ratio;
+* the tracking cost per camera-frame beyond decoding: (pipeline - decode) / frames, and timed
+  directly on a few frames held in memory (``--hold``), with the share of ``_step`` and
+  ``measure_blobs``;
+* the brute-force alternative: ``label_frame`` (detection and identification) on every frame;
+* the same linking step by trackpy (``trackpy.link`` on every frame's ``detect_blobs``; optional:
+  ``pip install -e '.[bench]'``), with how many of its links break or swap our IDs;
+* the peak memory of this process (and of each stage), and per workflow rule the largest
+  ``max_rss`` in Snakemake's benchmark files (``benchmarks/<test>/<rule>...tsv``).
+
+``simulate``: seconds per camera-frame to render and encode a simulated test, per ``--sizes``.
+``identify``: seconds to detect and label every target of one frame (one core), per ``--sizes``,
+with the number of targets labelled (frames rendered by the simulator, exact truth cameras).
 """
 
 from __future__ import annotations
 
 import argparse
+import resource
+import subprocess
+import sys
 import tempfile
 import time
 import tracemalloc
 from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+KIT_DESIGN = Path(__file__).resolve().parents[2] / "config" / "kit.yaml"
 
 
 def bench_simulate(width: int, height: int, frames: int, cameras: int = 2) -> dict:
@@ -19,7 +44,7 @@ def bench_simulate(width: int, height: int, frames: int, cameras: int = 2) -> di
     from triaxtrack.simulate import CameraRenderer, SimulationConfig, load_scene, make_scene
     from triaxtrack.video import VideoWriter
 
-    design = Path(__file__).resolve().parents[2] / "config" / "kit.yaml"
+    design = KIT_DESIGN
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         export_kit(load_design(design), tmp / "kit")
@@ -53,7 +78,7 @@ def bench_identify(width: int, height: int, repeat: int = 3) -> dict:
     from triaxtrack.simulate import CameraRenderer, SimulationConfig, load_scene, make_scene
 
     cv2.setNumThreads(1)
-    design = Path(__file__).resolve().parents[2] / "config" / "kit.yaml"
+    design = KIT_DESIGN
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         export_kit(load_design(design), tmp / "kit")
@@ -73,13 +98,461 @@ def bench_identify(width: int, height: int, repeat: int = 3) -> dict:
     return {"size": f"{width}x{height}", "seconds": min(times), "labelled": labelled}
 
 
+# ------------------------------------------------------------------ tracking vs decoding
+
+
+def _maxrss_mb(who: int = resource.RUSAGE_SELF) -> float:
+    """Peak resident memory (ru_maxrss) of this process or of its waited-for children, MiB."""
+    rss = resource.getrusage(who).ru_maxrss
+    return rss / 2**20 if sys.platform == "darwin" else rss / 1024  # bytes on macOS, KiB on Linux
+
+
+def _reset_peak() -> None:
+    """Reset this process's peak resident memory (VmHWM; Linux >= 4.0), when possible."""
+    try:
+        Path("/proc/self/clear_refs").write_text("5")
+    except OSError:
+        pass
+
+
+def _peak_mb() -> float:
+    """VmHWM of this process since the last :func:`_reset_peak`, MiB (NaN if not on Linux)."""
+    try:
+        for line in Path("/proc/self/status").read_text().splitlines():
+            if line.startswith("VmHWM:"):
+                return int(line.split()[1]) / 1024
+    except (OSError, ValueError):
+        pass
+    return float("nan")
+
+
+def _log(msg: str) -> None:
+    print(f"[bench] {msg}", file=sys.stderr, flush=True)
+
+
+_RENDER = (
+    "import sys; from triaxtrack.simulate import render_chunk; "
+    "render_chunk(sys.argv[1], sys.argv[2], 0, int(sys.argv[3]), sys.argv[4], sys.argv[5])"
+)
+
+
+def _render_video(tmp: Path, width: int, height: int, frames: int, strain: float, seed: int) -> dict:
+    """Simulate one camera's clip (in a child process, so that the renderer's memory does not
+    count in this one's peak); returns the paths and what was rendered."""
+    from triaxtrack.kit import export_kit, load_design
+    from triaxtrack.simulate import SimulationConfig, camera_names, make_scene
+
+    export_kit(load_design(KIT_DESIGN), tmp / "kit")
+    cfg = SimulationConfig(frames=frames, width=width, height=height, axial_strain=strain, seed=seed)
+    make_scene(cfg, tmp / "kit", tmp / "test", "bench")
+    camera = camera_names(cfg.cameras)[0]
+    video, obs = tmp / "test" / "videos" / f"{camera}.mp4", tmp / "test" / "truth" / f"{camera}.parquet"
+    _log(f"rendering {frames} frames of {camera} at {width}x{height} ...")
+    t0 = time.perf_counter()
+    argv = [str(tmp / "test"), camera, str(frames), str(video), str(obs)]
+    subprocess.run([sys.executable, "-c", _RENDER, *argv], check=True)
+    return {"cfg": cfg, "camera": camera, "test": tmp / "test", "video": video, "observations": obs,
+            "render_s": time.perf_counter() - t0}  # fmt: skip
+
+
+class _Timed:
+    """Wraps a function of a module, adding up the seconds spent in it (while installed)."""
+
+    def __init__(self, module, name: str):
+        self.module, self.name, self.fn, self.seconds = module, name, getattr(module, name), 0.0
+
+    def __enter__(self) -> _Timed:
+        def wrapper(*args, **kwargs):
+            t0 = time.perf_counter()
+            try:
+                return self.fn(*args, **kwargs)
+            finally:
+                self.seconds += time.perf_counter() - t0
+
+        setattr(self.module, self.name, wrapper)
+        return self
+
+    def __exit__(self, *exc) -> None:
+        setattr(self.module, self.name, self.fn)
+
+
+def _link_errors(linked: pd.DataFrame, tracks: pd.DataFrame, tol_px: float = 1.0) -> dict:
+    """trackpy's links against our IDs: every step k -> k+1 of a target we report at both frames
+    (matched to a detection within ``tol_px`` of our centroid) is ``agree`` (same trackpy
+    particle), ``wrong`` (the particle goes on to another detection) or ``broken`` (it ends)."""
+    from scipy.spatial import cKDTree
+
+    linked = linked.reset_index(drop=True)
+    det_id = np.full(len(linked), -1, np.int64)
+    ours = tracks[tracks["reason"] == ""]
+    for k, rows in linked.groupby("frame").indices.items():
+        mine = ours[ours["frame"] == k]
+        if mine.empty:
+            continue
+        d, j = cKDTree(mine[["u_px", "v_px"]].to_numpy()).query(
+            linked.loc[rows, ["x", "y"]].to_numpy(), distance_upper_bound=tol_px
+        )
+        hit = np.isfinite(d)
+        det_id[rows[hit]] = mine["id"].to_numpy()[j[hit]]
+    m = linked.assign(id=det_id)[det_id > 0].drop_duplicates(["id", "frame"])
+    now = m.set_index(["id", "frame"])["particle"].rename("p0")
+    nxt = m.assign(frame=m["frame"] - 1).set_index(["id", "frame"])["particle"].rename("p1")
+    steps = pd.concat([now, nxt], axis=1, join="inner")
+    differ = steps[steps["p0"] != steps["p1"]]
+    present = set(zip(linked["frame"].to_numpy(), linked["particle"].to_numpy(), strict=True))
+    wrong = sum((k + 1, p) in present for (_, k), p in differ["p0"].items())
+    return {
+        "steps": len(steps),
+        "agree": len(steps) - len(differ),
+        "wrong": wrong,
+        "broken": len(differ) - wrong,
+    }
+
+
+def bench_tracking(width: int, height: int, frames: int, hold: int = 6, strain: float = 0.05,
+                   seed: int = 1, repeat: int = 2) -> dict:  # fmt: skip
+    """Decode vs decode + tracking on one simulated camera's video (module docstring)."""
+    import triaxtrack.track as track
+    from triaxtrack.detect import detect_blobs
+    from triaxtrack.frames import CameraTiming, frame_map, iter_test_frames
+    from triaxtrack.identify import label_frame
+    from triaxtrack.kit import ct_codes, load_kit_design, target_table
+    from triaxtrack.optics import read_cameras
+    from triaxtrack.video import probe_video
+
+    r: dict = {"peak_mb": {}}
+    with tempfile.TemporaryDirectory(prefix="triaxtrack-bench-") as tmp:
+        sim = _render_video(Path(tmp), width, height, frames, strain, seed)
+        video, camera, cfg = sim["video"], sim["camera"], sim["cfg"]
+        r.update(
+            camera=camera,
+            sim=cfg,
+            render_s=sim["render_s"],
+            render_peak_mb=_maxrss_mb(resource.RUSAGE_CHILDREN),
+            video=probe_video(video),
+            video_mb=video.stat().st_size / 2**20,
+        )
+        n = r["video"]["frames"]
+        fmap = frame_map(CameraTiming(camera, cfg.fps), n, n)
+        cam = read_cameras(sim["test"] / "truth" / "cameras.json")[camera]
+        kit = load_kit_design(sim["test"] / "kit")
+        codes = ct_codes(kit, target_table(kit))
+        tcfg = track.TrackingConfig()
+
+        _log("labelling the first frame ...")
+        first = next(iter_test_frames(video, fmap, 0, 1))[1]
+        t0 = time.perf_counter()
+        labels = label_frame(first, cam, kit, codes)
+        r["label_s"] = time.perf_counter() - t0
+        own = labels[labels["id"] > 0]
+        r["labelled"], r["detections"] = own["id"].nunique(), len(labels)
+        r["spacing_px"] = track._init_state(labels, tcfg).spacing
+
+        def decode() -> int:
+            count = 0
+            for _, img in iter_test_frames(video, fmap, 0, n):
+                count += img is not None
+            return count
+
+        def pipeline() -> pd.DataFrame:
+            return track.track_frames(iter_test_frames(video, fmap, 0, n), labels, camera, range(n), tcfg)
+
+        _log(f"decode only and decode + tracking, {repeat} times each ...")
+        times: dict[str, list[float]] = {"decode": [], "pipeline": []}
+        for _ in range(repeat):  # alternate, so that a slow spell of the machine hits both
+            for name, fn in (("decode", decode), ("pipeline", pipeline)):
+                _reset_peak()
+                t0 = time.perf_counter()
+                out = fn()
+                times[name].append(time.perf_counter() - t0)
+                r["peak_mb"][name] = max(r["peak_mb"].get(name, 0.0), _peak_mb())
+                if name == "pipeline":
+                    tracks = out
+        r["decode_s"], r["pipeline_s"] = min(times["decode"]), min(times["pipeline"])
+        r["tracks"] = tracks
+
+        _log(f"tracking on {hold} decoded frames held in memory ...")
+        held = [(k, img) for k, img in iter_test_frames(video, fmap, 0, min(hold, n))]
+        best = None
+        for _ in range(3):
+            with _Timed(track, "_step") as step, _Timed(track, "measure_blobs") as meas:
+                t0 = time.perf_counter()
+                track.track_frames(held, labels, camera, [k for k, _ in held], tcfg)
+                total = time.perf_counter() - t0
+            if best is None or total < best[0]:
+                best = (total, step.seconds, meas.seconds)
+        r["held"] = len(held)
+        r["direct_s"], r["step_s"], r["measure_s"] = (x / len(held) for x in best)
+
+        _log(f"label_frame on each of the {len(held)} held frames ...")
+        _reset_peak()
+        t0 = time.perf_counter()
+        for _, img in held:
+            label_frame(img, cam, kit, codes)
+        r["brute_s"] = (time.perf_counter() - t0) / len(held)
+        r["peak_mb"]["label_frame"] = _peak_mb()
+        del held
+
+        _log("detect_blobs on every frame, for trackpy ...")
+        parts, det_s = [], 0.0
+        for k, img in iter_test_frames(video, fmap, 0, n):
+            t0 = time.perf_counter()
+            blobs = detect_blobs(img)
+            det_s += time.perf_counter() - t0
+            parts.append(pd.DataFrame({"x": blobs["u_px"], "y": blobs["v_px"], "frame": k}))
+        r["detect_s"] = det_s / n
+        dets = pd.concat(parts, ignore_index=True)
+        r["detections_per_frame"] = len(dets) / n
+        r["search_range_px"] = float(np.median(tcfg.gate * r["spacing_px"]))
+        r["trackpy"] = _bench_trackpy(dets, tracks, r["search_range_px"], n)
+        r["truth"] = _truth_errors(tracks, pd.read_parquet(sim["observations"]))
+    r["maxrss_mb"] = _maxrss_mb()
+    return r
+
+
+def _truth_errors(tracks: pd.DataFrame, truth: pd.DataFrame) -> dict:
+    """Our reported centroids against the simulator's exact ones, by (frame, ID)."""
+    got = tracks[tracks["reason"] == ""].merge(truth, on=["frame", "id"], suffixes=("", "_true"))
+    err = np.hypot(got["u_px"] - got["u_px_true"], got["v_px"] - got["v_px_true"])
+    return {"compared": len(got), "median_px": float(np.median(err)) if len(err) else float("nan"),
+            "wrong": int((err > 1.0).sum())}  # fmt: skip
+
+
+def _motion(tracks: pd.DataFrame) -> tuple[float, float]:
+    """Median and largest displacement of a reported target from one frame to the next, px."""
+    ok = tracks[tracks["reason"] == ""]
+    u = ok.pivot(index="id", columns="frame", values="u_px").sort_index(axis=1)
+    v = ok.pivot(index="id", columns="frame", values="v_px").reindex_like(u)
+    step = np.hypot(np.diff(u.to_numpy(), axis=1), np.diff(v.to_numpy(), axis=1))
+    step = step[np.isfinite(step)]
+    return (float(np.median(step)), float(step.max())) if len(step) else (float("nan"), float("nan"))
+
+
+def workflow_peaks(root: Path) -> dict[str, dict[str, tuple[float, int]]]:
+    """Per test folder of Snakemake's ``benchmarks/`` and per rule (``<rule>.tsv`` or any
+    ``<rule>/**/*.tsv``): the largest ``max_rss`` (MB) and the number of benchmark files."""
+    out: dict[str, dict[str, tuple[float, int]]] = {}
+    for test in sorted(p for p in root.iterdir() if p.is_dir()) if root.is_dir() else []:
+        rules: dict[str, list[float]] = {}
+        for f in sorted(test.rglob("*.tsv")):
+            rule = f.relative_to(test).parts[0].removesuffix(".tsv")
+            try:
+                rss = pd.to_numeric(pd.read_csv(f, sep="\t").get("max_rss"), errors="coerce")
+            except (OSError, ValueError, pd.errors.EmptyDataError):
+                continue
+            rules.setdefault(rule, []).append(float(np.nanmax(rss)) if rss is not None and rss.notna().any()
+                                              else float("nan"))  # fmt: skip
+        if rules:
+            out[test.name] = {k: (float(np.nanmax(v)) if np.isfinite(v).any() else float("nan"), len(v))
+                              for k, v in rules.items()}  # fmt: skip
+    return out
+
+
+def _bench_trackpy(dets: pd.DataFrame, tracks: pd.DataFrame, search_range: float, n: int) -> dict | str:
+    """trackpy.link on the detections, memory 0 and 3: seconds per frame, links against our IDs."""
+    try:
+        import trackpy
+    except ImportError:
+        return "trackpy not installed"
+    trackpy.quiet()
+    out: dict = {"version": trackpy.__version__}
+    for memory in (0, 3):
+        _log(f"trackpy.link, memory {memory} ...")
+        _reset_peak()
+        t0 = time.perf_counter()
+        linked = trackpy.link(dets.copy(), search_range, memory=memory)
+        seconds, peak = (time.perf_counter() - t0) / n, _peak_mb()
+        out[memory] = {"seconds": seconds, "peak_mb": peak, **_link_errors(linked, tracks)}
+    return out
+
+
+def _table(rows: list[tuple[str, str, str, str]]) -> str:
+    """Rows of (what, value, unit, note) as aligned text; a row with only ``what`` is a heading."""
+    w = [max(len(r[i]) for r in rows if any(r[1:])) for i in range(3)]
+    lines = []
+    for r in rows:
+        if not any(r[1:]):
+            lines.append(r[0])
+        else:
+            lines.append(f"  {r[0]:<{w[0]}}  {r[1]:>{w[1]}}  {r[2]:<{w[2]}}  {r[3]}".rstrip())
+    return "\n".join(lines)
+
+
+def print_tracking(r: dict, benchmarks: Path) -> None:
+    v, sim, n = r["video"], r["sim"], r["video"]["frames"]
+    tracks = r["tracks"]
+    ok = tracks["reason"] == ""
+    per_frame = ok.groupby(tracks["frame"]).sum()
+    med_step, max_step = _motion(tracks)
+    dec_fps, pipe_fps = n / r["decode_s"], n / r["pipeline_s"]
+    beyond_ms = (r["pipeline_s"] - r["decode_s"]) / n * 1e3
+    direct_ms = r["direct_s"] * 1e3
+    print(
+        f"Tracking benchmark on one video: {v['width']}x{v['height']} {v['codec']} (libx264 crf {sim.crf}, "
+        f"veryfast, grey in yuv420p), {n} frames at {v['fps']:g} fps, {r['video_mb']:.1f} MB;"
+    )
+    print(
+        f"  camera {r['camera']} of a simulated test (seed {sim.seed}, axial strain {sim.axial_strain:g} "
+        f"over the {n} frames), rendered in {r['render_s']:.0f} s ({r['render_s'] / n:.1f} s/frame, "
+        f"child peak {r['render_peak_mb']:.0f} MB)"
+    )
+    print(
+        f"  {r['labelled']} targets labelled in frame 0 ({r['detections']} detections; label_frame "
+        f"{r['label_s']:.2f} s, once per chunk, not in the figures below); reported per frame: "
+        f"mean {per_frame.mean():.0f}, min {per_frame.min()}"
+    )
+    t = r["truth"]
+    print(
+        f"  dots move {med_step:.2f} px/frame (median), up to {max_step:.2f} px/frame; our centroids vs the "
+        f"simulator's: median {t['median_px']:.3f} px, {t['wrong']} of {t['compared']} farther than 1 px"
+    )
+    print(
+        f"  spacing to the nearest detection: median {np.median(r['spacing_px']):.1f} px, so the gate "
+        f"({track_gate():g} x spacing) is {r['search_range_px']:.1f} px (median)"
+    )
+    print()
+    rows = [
+        ("Throughput (same video, same run; best of the repeats)", "", "", ""),
+        (
+            "decode only (iter_test_frames)",
+            f"{dec_fps:.1f}",
+            "frames/s",
+            f"{r['decode_s']:.2f} s for {n} frames",
+        ),
+        (
+            "pipeline: decode + track_frames",
+            f"{pipe_fps:.1f}",
+            "frames/s",
+            f"{r['pipeline_s']:.2f} s for {n} frames",
+        ),
+        ("ratio pipeline / decode", f"{pipe_fps / dec_fps:.2f}", "", "aim >= 0.8"),
+        (f"Tracking cost per {v['width']}x{v['height']} camera-frame beyond decoding", "", "", ""),
+        ("(pipeline - decode) / frames", f"{beyond_ms:.1f}", "ms/frame", "aim <= 3 ms"),
+        (
+            "timed on decoded frames in memory",
+            f"{direct_ms:.1f}",
+            "ms/frame",
+            f"track_frames on {r['held']} held frames, best of 3",
+        ),
+        ("  of which _step", f"{r['step_s'] * 1e3:.1f}", "ms/frame", "the rest: the per-frame table rows"),
+        ("  of which measure_blobs", f"{r['measure_s'] * 1e3:.1f}", "ms/frame", "inside _step"),
+        ("Brute force: detect and label every frame", "", "", ""),
+        (
+            "label_frame per frame",
+            f"{r['brute_s'] * 1e3:.0f}",
+            "ms/frame",
+            f"{r['brute_s'] / r['direct_s']:.0f} x tracking (mean of {r['held']} frames)",
+        ),
+        (
+            "  detect_blobs alone",
+            f"{r['detect_s'] * 1e3:.0f}",
+            "ms/frame",
+            f"{r['detect_s'] / r['direct_s']:.0f} x tracking (mean of {n} frames)",
+        ),
+    ]
+    tp = r["trackpy"]
+    if isinstance(tp, str):
+        rows.append(("trackpy.link", tp, "", ""))
+    else:
+        rows.append(
+            (
+                f"trackpy {tp['version']}: link every frame's detect_blobs "
+                f"({r['detections_per_frame']:.0f} per frame)",
+                "",
+                "",
+                "",
+            )
+        )
+        for memory in (0, 3):
+            m = tp[memory]
+            rows.append(
+                (
+                    f"trackpy.link, memory {memory}, search_range {r['search_range_px']:.1f} px",
+                    f"{m['seconds'] * 1e3:.1f}",
+                    "ms/frame",
+                    f"{m['seconds'] / r['direct_s']:.1f} x tracking (linking alone, no detection)",
+                )
+            )
+            rows.append(
+                (
+                    f"  its links vs our IDs, memory {memory}",
+                    f"{m['agree']}/{m['steps']}",
+                    "agree",
+                    f"{m['wrong']} wrong (onto another dot), {m['broken']} broken (track ends)",
+                )
+            )
+    rows += [
+        ("Peak memory", "", "", ""),
+        ("this process (ru_maxrss)", f"{r['maxrss_mb']:.0f}", "MB", "rendering ran in a child process"),
+    ]
+    for stage, mb in r["peak_mb"].items():
+        rows.append((f"  during {stage} (VmHWM)", f"{mb:.0f}", "MB", ""))
+    if not isinstance(tp, str):
+        for memory in (0, 3):
+            rows.append(
+                (f"  during trackpy.link, memory {memory} (VmHWM)", f"{tp[memory]['peak_mb']:.0f}", "MB", "")
+            )
+    print(_table(rows))
+    print()
+    peaks = workflow_peaks(benchmarks)
+    if not peaks:
+        print(f"Workflow rules' peak memory ({benchmarks}/): no workflow run found")
+        return
+    print(
+        f"Workflow rules' peak memory: the largest max_rss per rule in {benchmarks}/<test>/<rule>...tsv "
+        "(MB; number of files)"
+    )
+    for test, rules in peaks.items():
+        print(f"  {test}:")
+        width = max(len(k) for k in rules)
+        for rule, (mb, files) in sorted(rules.items()):
+            print(f"    {rule:<{width}}  {mb:7.0f} MB  ({files})")
+
+
+def track_gate() -> float:
+    from triaxtrack.track import TrackingConfig
+
+    return TrackingConfig().gate
+
+
+def _size(text: str) -> tuple[int, int]:
+    try:
+        w, h = (int(x) for x in text.lower().split("x"))
+    except ValueError as err:
+        raise argparse.ArgumentTypeError(f"a size is WIDTHxHEIGHT, e.g. 3840x2160, not {text!r}") from err
+    if w <= 0 or h <= 0 or w % 2 or h % 2:
+        raise argparse.ArgumentTypeError(f"width and height must be even and positive, not {text!r}")
+    return w, h
+
+
 def main(argv: list[str] | None = None) -> None:
-    p = argparse.ArgumentParser(description=__doc__)
-    p.add_argument("what", nargs="*", default=["simulate", "identify"], choices=["simulate", "identify"])
-    p.add_argument("--sizes", default="1280x720,1920x1080,3840x2160")
-    p.add_argument("--frames", type=int, default=10)
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("what", nargs="*", help="tracking (the default), simulate, identify")
+    p.add_argument(
+        "--size", type=_size, default=(3840, 2160), help="tracking: video size (default 3840x2160)"
+    )
+    p.add_argument("--frames", type=int, default=24, help="tracking: video frames (default 24, >= 2)")
+    p.add_argument(
+        "--hold", type=int, default=6, help="tracking: frames held in memory for the direct timing"
+    )
+    p.add_argument("--strain", type=float, default=0.05, help="tracking: axial strain over the clip")
+    p.add_argument("--repeat", type=int, default=2, help="tracking: runs of decode and pipeline (best taken)")
+    p.add_argument("--benchmarks", type=Path, default=Path("benchmarks"),
+                   help="tracking: Snakemake's benchmark folder (default ./benchmarks)")  # fmt: skip
+    p.add_argument("--sizes", default="1280x720,1920x1080,3840x2160", help="simulate, identify: sizes")
+    p.add_argument("--sim-frames", type=int, default=10, help="simulate: frames per camera")
     args = p.parse_args(argv)
-    sizes = [tuple(int(x) for x in size.split("x")) for size in args.sizes.split(",")]
+    args.what = args.what or ["tracking"]  # (no `choices`: Python 3.11 checks an empty list against them)
+    if set(args.what) - {"tracking", "simulate", "identify"}:
+        p.error(f"what: choose among tracking, simulate, identify, not {args.what}")
+    if args.frames < 2 or args.hold < 1 or args.repeat < 1:
+        p.error("--frames must be >= 2, --hold and --repeat >= 1")
+    if "tracking" in args.what:
+        w, h = args.size
+        print_tracking(
+            bench_tracking(w, h, args.frames, args.hold, args.strain, repeat=args.repeat), args.benchmarks
+        )
+    sizes = [_size(size) for size in args.sizes.split(",")]
     for w, h in sizes if "identify" in args.what else []:
         r = bench_identify(w, h)
         print(
@@ -87,7 +560,7 @@ def main(argv: list[str] | None = None) -> None:
             f"({r['labelled']} targets labelled; best of 3)"
         )
     for w, h in sizes if "simulate" in args.what else []:
-        r = bench_simulate(w, h, args.frames)
+        r = bench_simulate(w, h, args.sim_frames)
         print(f"simulate {r['size']:>9}: render {r['render_s_per_frame']:.3f} s/frame, encode "
               f"{r['encode_s_per_frame']:.3f} s/frame ({r['camera_frames']} camera-frames, "
               f"peak Python memory {r['peak_python_mb']:.0f} MB)")  # fmt: skip

@@ -20,6 +20,7 @@ from triaxtrack.calibrate import calibrated_camera, read_calibration
 from triaxtrack.optics import Camera, pixels_to_normalized, read_cameras
 
 COLUMNS = ["metric", "item", "value", "tolerance", "unit", "passed", "source"]
+AT_LEAST = {"membrane_3_rays"}  # per-frame metrics whose tolerance is a minimum
 UNDISTORTION_GRID_PX = 8  # spacing of the pixel grid the undistortion maps are compared on
 
 
@@ -40,6 +41,11 @@ class ScoreTolerances:
     mean_reprojection_px: float = 0.3  # reconstruction (quality.json), all cameras and per camera
     membrane_rms_mm: float = 0.05  # 3-D error of the membrane dots against the truth
     membrane_3_rays: float = 0.9  # minimum share of the membrane dots reconstructed from 3+ rays
+    id_swaps: float = 0.0  # tracked observations farther than wrong_id_px from their own truth
+    membrane_kept: float = 0.95  # share of the membrane dots visible at the start still at the end
+    volume_rel: float = 0.0025  # |V - V_true| / V_true at every processed frame
+    volume_change_rel: float = 0.0005  # |dV - dV_true| / V0_true at every processed frame
+    axial_strain: float = 0.0005  # |axial strain - true|, at every processed frame
 
     @staticmethod
     def from_dict(d: dict | None) -> ScoreTolerances:
@@ -288,7 +294,100 @@ def score_points(
                     )
         share = float(((where == "membrane") & (got["n_rays"].to_numpy() >= 3)).sum() / max(n_membrane, 1))
         rows.append(_metric("membrane_3_rays", item, share, tol.membrane_3_rays, "", source, minimum=True))
+    return summarise_frames(pd.DataFrame(rows, columns=COLUMNS))
+
+
+def summarise_frames(df: pd.DataFrame) -> pd.DataFrame:
+    """Per-frame rows (items ``<what>@<frame>``) cut down to the first and the last frame and, per
+    metric, the worst frame (``worst@<frame>``) and a count of the frames that failed
+    (``failed frames``, tolerance 0), so that a long test gives a short table."""
+    if df.empty:
+        return df
+    frame = df["item"].str.rsplit("@", n=1).str[1].astype(int)
+    first, last = frame.min(), frame.max()
+    keep = [df[frame.isin([first, last])]]
+    for metric, g in df.groupby("metric", sort=False):
+        if g["item"].nunique() <= 2:
+            continue
+        worst = g.loc[g["value"].idxmin() if metric in AT_LEAST else g["value"].idxmax()]
+        keep.append(worst.to_frame().T.assign(item="worst@" + str(worst["item"]).rsplit("@", 1)[1]))
+        if g["tolerance"].notna().any():
+            failed = float((~g["passed"]).sum())
+            row = _metric(metric, "failed frames", failed, 0.0, "frames", g["source"].iloc[0])
+            keep.append(pd.DataFrame([row]))
+    out = pd.concat(keep, ignore_index=True)
+    return out.astype({"value": float, "tolerance": float, "passed": bool})
+
+
+def score_tracking(
+    observations: pd.DataFrame,
+    truth: pd.DataFrame,
+    tol: ScoreTolerances,
+    source: str = "observations.parquet",
+) -> pd.DataFrame:
+    """ID swaps: reported observations (every camera and processed frame) farther than
+    ``wrong_id_px`` from their own true projection (``id_swaps``, tolerance ``tol.id_swaps``),
+    the largest distance, and (reported only) the observations the truth has no projection for
+    (a target the simulator counts as hidden or too oblique)."""
+    m = observations.merge(truth, on=["camera", "frame", "id"], how="left", suffixes=("", "_true"))
+    d = np.hypot(m["u_px"] - m["u_px_true"], m["v_px"] - m["v_px_true"])
+    known = np.isfinite(d)
+    n_frames = observations["frame"].nunique()
+    swaps = float((d[known] > tol.wrong_id_px).sum())
+    rows = [
+        _metric("id_swaps", f"all ({n_frames} frames)", swaps, tol.id_swaps, "observations", source),
+        _metric("observation_max_error", "all", float(np.max(d[known].to_numpy(), initial=0.0)), np.nan, "px", source),
+        _metric("observation_median_error", "all", float(np.median(d[known])) if known.any() else np.nan,
+                np.nan, "px", source),
+        _metric("observations_without_truth", "all", float((~known).sum()), np.nan, "observations", source),
+    ]  # fmt: skip
     return pd.DataFrame(rows, columns=COLUMNS)
+
+
+def score_kept(
+    points: pd.DataFrame, truth: pd.DataFrame, table: pd.DataFrame, tol: ScoreTolerances,
+    source: str = "points.parquet",
+) -> pd.DataFrame:  # fmt: skip
+    """Share of the membrane dots visible at the start (the truth's first frame: seen by two or
+    more cameras) that are still reconstructed at the last processed frame (``membrane_kept``)."""
+    membrane = table.loc[table["surface"] == "membrane", "id"]
+    first, last = int(points["frame"].min()), int(points["frame"].max())
+    t0 = truth[(truth["frame"] == first) & truth["id"].isin(membrane) & (truth["n_rays"] >= 2)]
+    end = points[(points["frame"] == last) & points["id"].isin(t0["id"])]
+    share = len(end) / max(len(t0), 1)
+    return pd.DataFrame([_metric("membrane_kept", f"{first}->{last}", share, tol.membrane_kept, "", source,
+                                 minimum=True)], columns=COLUMNS)  # fmt: skip
+
+
+def score_volume(
+    volume: pd.DataFrame, truth: pd.DataFrame, tol: ScoreTolerances, source: str = "volume.parquet"
+) -> pd.DataFrame:
+    """Per processed frame: the volume's relative error (``volume_error``), the volume change's
+    error over the true initial volume (``volume_change_error``) and the axial strain's error,
+    cut down by :func:`summarise_frames`; a frame the results do not measure fails."""
+    m = truth.merge(volume, on="frame", how="inner", suffixes=("_true", ""))
+    v0t = float(m["volume_mm3_true"].iloc[0]) if len(m) else np.nan
+    v0 = float(m["volume_mm3"].iloc[0]) if len(m) else np.nan
+    rows = []
+    for r in m.itertuples(index=False):
+        item = f"all@{r.frame}"
+        rows += [
+            _metric("volume_error", item, abs(r.volume_mm3 - r.volume_mm3_true) / r.volume_mm3_true,
+                    tol.volume_rel, "", source),
+            _metric("volume_change_error", item, abs((r.volume_mm3 - v0) - (r.volume_mm3_true - v0t)) / v0t,
+                    tol.volume_change_rel, "", source),
+            _metric("axial_strain_error", item, abs(r.axial_strain - r.axial_strain_true), tol.axial_strain,
+                    "", source),
+        ]  # fmt: skip
+    out = summarise_frames(pd.DataFrame(rows, columns=COLUMNS))
+    missing = sorted(set(volume["frame"]) - set(truth["frame"]))
+    measured = int(np.isfinite(volume["volume_mm3"]).sum())
+    share = float(measured) / max(len(volume), 1)
+    row = _metric("frames_measured", "all", share, 1.0, "", source, minimum=True)
+    out = pd.concat([out, pd.DataFrame([row], columns=COLUMNS)])
+    if missing:
+        raise ValueError(f"{source}: frames {missing[:5]} are not in the truth")
+    return out.reset_index(drop=True)
 
 
 def score_quality(quality: dict, tol: ScoreTolerances, source: str = "quality.json") -> pd.DataFrame:
@@ -328,6 +427,13 @@ def score(results_dir: str | Path, truth_dir: str | Path, tol: ScoreTolerances |
         parts.append(score_quality(json.loads((results_dir / "quality.json").read_text()), tol))
     if (results_dir / "points.parquet").exists():
         parts.append(_score_points(results_dir / "points.parquet", truth_dir, tol))
+    if (results_dir / "tracking.parquet").exists() and (results_dir / "observations.parquet").exists():
+        parts.append(_score_tracking(results_dir / "observations.parquet", truth_dir, tol))
+    if (results_dir / "volume.parquet").exists():
+        from triaxtrack.tables import VOLUME, read_table
+
+        parts.append(score_volume(read_table(results_dir / "volume.parquet", VOLUME),
+                                  read_table(truth_dir / "volume.parquet", VOLUME), tol))  # fmt: skip
     if not parts:
         return pd.DataFrame(columns=COLUMNS)
     return pd.concat(parts, ignore_index=True)
@@ -370,7 +476,19 @@ def _score_points(path: Path, truth_dir: Path, tol: ScoreTolerances) -> pd.DataF
 
     table = target_table(_test_kit(truth_dir))
     truth = read_table(truth_dir / "points.parquet", POINTS)
-    return score_points(read_table(path, POINTS), truth, table, tol, path.name)
+    points = read_table(path, POINTS)
+    parts = [score_points(points, truth, table, tol, path.name)]
+    if points["frame"].nunique() > 1:
+        parts.append(score_kept(points, truth, table, tol, path.name))
+    return pd.concat(parts, ignore_index=True)
+
+
+def _score_tracking(path: Path, truth_dir: Path, tol: ScoreTolerances) -> pd.DataFrame:
+    """ID swaps of a results folder's observations.parquet (every tracked frame)."""
+    from triaxtrack.tables import OBSERVATIONS, read_table
+
+    truth = read_table(truth_dir / "observations.parquet", OBSERVATIONS)
+    return score_tracking(read_table(path, OBSERVATIONS), truth, tol, path.name)
 
 
 def format_table(df: pd.DataFrame) -> str:
