@@ -58,8 +58,9 @@ def test_tracking_and_volume_errors_fail(small_test, tmp_path):
     rows = score_volume(off, vol, tol)
     failed = set(rows[~rows.passed].metric)
     assert failed == {"volume_error", "volume_change_error"}
-    assert rows.set_index(["metric", "item"]).loc[("volume_error", "worst@2"), "value"] == pytest.approx(0.003)
-    assert rows.set_index(["metric", "item"]).loc[("volume_error", "failed frames"), "value"] == 1
+    by_item = rows.set_index(["metric", "item"])["value"]
+    assert by_item[("volume_error", "worst@2")] == pytest.approx(0.003)
+    assert by_item[("volume_error", "failed frames")] == 1
 
     points = pd.read_parquet(truth / "points.parquet")
     table = target_table(load_kit_design(small_test / "kit"))

@@ -1,8 +1,9 @@
 """Benchmarks that print figures (they assert nothing): ``python -m triaxtrack.bench [what ...]``.
 
-``tracking`` (the default): one camera of a simulated test is rendered at ``--size`` (default
-3840x2160) for ``--frames`` frames (default 24) and written as H.264 (the simulation defaults:
-crf 14, veryfast), and on that one video this prints
+``tracking`` (the default): the first ``--frames`` frames (default 24) of one camera of a simulated
+``--test-frames``-frame test (default 100, as the workflow's demo: the dots move as fast per frame)
+are rendered at ``--size`` (default 3840x2160) and written as H.264 (the simulation defaults: crf 14,
+veryfast; all in a child process), and on that one video this prints
 
 * the decode-only frame rate (decoding to grey frames as the pipeline does,
   :func:`triaxtrack.frames.iter_test_frames`), and the whole pipeline's (decoding and
@@ -107,12 +108,22 @@ def _maxrss_mb(who: int = resource.RUSAGE_SELF) -> float:
     return rss / 2**20 if sys.platform == "darwin" else rss / 1024  # bytes on macOS, KiB on Linux
 
 
+_PEAK_BEFORE_RESETS = [0.0]  # ru_maxrss before the last reset (a reset lowers ru_maxrss too), MiB
+
+
 def _reset_peak() -> None:
-    """Reset this process's peak resident memory (VmHWM; Linux >= 4.0), when possible."""
+    """Reset this process's peak resident memory (VmHWM; Linux >= 4.0), when possible, keeping the
+    peak so far for :func:`_process_peak_mb`."""
+    _PEAK_BEFORE_RESETS[0] = max(_PEAK_BEFORE_RESETS[0], _maxrss_mb())
     try:
         Path("/proc/self/clear_refs").write_text("5")
     except OSError:
         pass
+
+
+def _process_peak_mb() -> float:
+    """This process's peak resident memory (ru_maxrss) over its whole life, resets included, MiB."""
+    return max(_PEAK_BEFORE_RESETS[0], _maxrss_mb())
 
 
 def _peak_mb() -> float:
@@ -130,29 +141,41 @@ def _log(msg: str) -> None:
     print(f"[bench] {msg}", file=sys.stderr, flush=True)
 
 
-_RENDER = (
-    "import sys; from triaxtrack.simulate import render_chunk; "
-    "render_chunk(sys.argv[1], sys.argv[2], 0, int(sys.argv[3]), sys.argv[4], sys.argv[5])"
-)
-
-
-def _render_video(tmp: Path, width: int, height: int, frames: int, strain: float, seed: int) -> dict:
-    """Simulate one camera's clip (in a child process, so that the renderer's memory does not
-    count in this one's peak); returns the paths and what was rendered."""
+def _simulate_clip(tmp: str, width: str, height: str, frames: str, test_frames: str, seed: str) -> None:
+    """Run in a child process by :func:`_render_video` (arguments as strings): export the kit,
+    write the scene and render the clip of the first camera."""
     from triaxtrack.kit import export_kit, load_design
-    from triaxtrack.simulate import SimulationConfig, camera_names, make_scene
+    from triaxtrack.simulate import camera_names, make_scene, render_chunk
 
-    export_kit(load_design(KIT_DESIGN), tmp / "kit")
-    cfg = SimulationConfig(frames=frames, width=width, height=height, axial_strain=strain, seed=seed)
-    make_scene(cfg, tmp / "kit", tmp / "test", "bench")
+    root = Path(tmp)
+    export_kit(load_design(KIT_DESIGN), root / "kit")
+    cfg = _clip_config(int(width), int(height), int(frames), int(test_frames), int(seed))
+    make_scene(cfg, root / "kit", root / "test", "bench")
     camera = camera_names(cfg.cameras)[0]
-    video, obs = tmp / "test" / "videos" / f"{camera}.mp4", tmp / "test" / "truth" / f"{camera}.parquet"
+    render_chunk(root / "test", camera, 0, int(frames), root / "video.mp4", root / "truth.parquet")
+
+
+def _clip_config(width: int, height: int, frames: int, test_frames: int, seed: int):
+    from triaxtrack.simulate import SimulationConfig
+
+    return SimulationConfig(frames=max(frames, test_frames), width=width, height=height, seed=seed)
+
+
+def _render_video(tmp: Path, width: int, height: int, frames: int, test_frames: int, seed: int) -> dict:
+    """The first ``frames`` frames of one camera of a simulated test of ``test_frames`` frames (the
+    simulation defaults otherwise: the dots move as fast per frame as in the workflow's demo),
+    made in a child process (the kit export's and renderer's memory do not count in this one's)."""
+    from triaxtrack.simulate import camera_names
+
+    cfg = _clip_config(width, height, frames, test_frames, seed)
+    camera = camera_names(cfg.cameras)[0]
     _log(f"rendering {frames} frames of {camera} at {width}x{height} ...")
     t0 = time.perf_counter()
-    argv = [str(tmp / "test"), camera, str(frames), str(video), str(obs)]
-    subprocess.run([sys.executable, "-c", _RENDER, *argv], check=True)
-    return {"cfg": cfg, "camera": camera, "test": tmp / "test", "video": video, "observations": obs,
-            "render_s": time.perf_counter() - t0}  # fmt: skip
+    code = "import sys; from triaxtrack.bench import _simulate_clip; _simulate_clip(*sys.argv[1:])"
+    argv = [str(x) for x in (tmp, width, height, frames, test_frames, seed)]
+    subprocess.run([sys.executable, "-c", code, *argv], check=True)
+    return {"cfg": cfg, "camera": camera, "test": tmp / "test", "video": tmp / "video.mp4",
+            "observations": tmp / "truth.parquet", "render_s": time.perf_counter() - t0}  # fmt: skip
 
 
 class _Timed:
@@ -209,8 +232,8 @@ def _link_errors(linked: pd.DataFrame, tracks: pd.DataFrame, tol_px: float = 1.0
     }
 
 
-def bench_tracking(width: int, height: int, frames: int, hold: int = 6, strain: float = 0.05,
-                   seed: int = 1, repeat: int = 2) -> dict:  # fmt: skip
+def bench_tracking(width: int, height: int, frames: int, hold: int = 6, test_frames: int = 100,
+                   seed: int = 1, repeat: int = 3) -> dict:  # fmt: skip
     """Decode vs decode + tracking on one simulated camera's video (module docstring)."""
     import triaxtrack.track as track
     from triaxtrack.detect import detect_blobs
@@ -222,7 +245,7 @@ def bench_tracking(width: int, height: int, frames: int, hold: int = 6, strain: 
 
     r: dict = {"peak_mb": {}}
     with tempfile.TemporaryDirectory(prefix="triaxtrack-bench-") as tmp:
-        sim = _render_video(Path(tmp), width, height, frames, strain, seed)
+        sim = _render_video(Path(tmp), width, height, frames, test_frames, seed)
         video, camera, cfg = sim["video"], sim["camera"], sim["cfg"]
         r.update(
             camera=camera,
@@ -274,6 +297,7 @@ def bench_tracking(width: int, height: int, frames: int, hold: int = 6, strain: 
         _log(f"tracking on {hold} decoded frames held in memory ...")
         held = [(k, img) for k, img in iter_test_frames(video, fmap, 0, min(hold, n))]
         best = None
+        _reset_peak()
         for _ in range(3):
             with _Timed(track, "_step") as step, _Timed(track, "measure_blobs") as meas:
                 t0 = time.perf_counter()
@@ -282,6 +306,7 @@ def bench_tracking(width: int, height: int, frames: int, hold: int = 6, strain: 
             if best is None or total < best[0]:
                 best = (total, step.seconds, meas.seconds)
         r["held"] = len(held)
+        r["peak_mb"][f"tracking {len(held)} held frames"] = _peak_mb()
         r["direct_s"], r["step_s"], r["measure_s"] = (x / len(held) for x in best)
 
         _log(f"label_frame on each of the {len(held)} held frames ...")
@@ -305,8 +330,9 @@ def bench_tracking(width: int, height: int, frames: int, hold: int = 6, strain: 
         r["detections_per_frame"] = len(dets) / n
         r["search_range_px"] = float(np.median(tcfg.gate * r["spacing_px"]))
         r["trackpy"] = _bench_trackpy(dets, tracks, r["search_range_px"], n)
-        r["truth"] = _truth_errors(tracks, pd.read_parquet(sim["observations"]))
-    r["maxrss_mb"] = _maxrss_mb()
+        truth = pd.read_parquet(sim["observations"])
+        r["truth"], r["motion_px"] = _truth_errors(tracks, truth), _motion(truth)
+    r["maxrss_mb"] = _process_peak_mb()
     return r
 
 
@@ -318,9 +344,11 @@ def _truth_errors(tracks: pd.DataFrame, truth: pd.DataFrame) -> dict:
             "wrong": int((err > 1.0).sum())}  # fmt: skip
 
 
-def _motion(tracks: pd.DataFrame) -> tuple[float, float]:
-    """Median and largest displacement of a reported target from one frame to the next, px."""
-    ok = tracks[tracks["reason"] == ""]
+def _motion(truth: pd.DataFrame) -> tuple[float, float]:
+    """Median and largest true displacement of a membrane dot from one frame to the next, px."""
+    from triaxtrack.track import target_kind
+
+    ok = truth[target_kind(truth["id"].to_numpy()) == 3]
     u = ok.pivot(index="id", columns="frame", values="u_px").sort_index(axis=1)
     v = ok.pivot(index="id", columns="frame", values="v_px").reindex_like(u)
     step = np.hypot(np.diff(u.to_numpy(), axis=1), np.diff(v.to_numpy(), axis=1))
@@ -355,7 +383,11 @@ def _bench_trackpy(dets: pd.DataFrame, tracks: pd.DataFrame, search_range: float
     except ImportError:
         return "trackpy not installed"
     trackpy.quiet()
-    out: dict = {"version": trackpy.__version__}
+    try:
+        from trackpy.try_numba import NUMBA_AVAILABLE as numba
+    except ImportError:
+        numba = False
+    out: dict = {"version": f"{trackpy.__version__} ({'numba' if numba else 'no numba: pure Python'})"}
     for memory in (0, 3):
         _log(f"trackpy.link, memory {memory} ...")
         _reset_peak()
@@ -378,38 +410,37 @@ def _table(rows: list[tuple[str, str, str, str]]) -> str:
     return "\n".join(lines)
 
 
+def _times(ratio: float) -> str:
+    return f"{ratio:.0f} x" if ratio >= 10 else f"{ratio:.1f} x"
+
+
 def print_tracking(r: dict, benchmarks: Path) -> None:
     v, sim, n = r["video"], r["sim"], r["video"]["frames"]
     tracks = r["tracks"]
     ok = tracks["reason"] == ""
     per_frame = ok.groupby(tracks["frame"]).sum()
-    med_step, max_step = _motion(tracks)
+    med_step, max_step = r["motion_px"]
     dec_fps, pipe_fps = n / r["decode_s"], n / r["pipeline_s"]
     beyond_ms = (r["pipeline_s"] - r["decode_s"]) / n * 1e3
     direct_ms = r["direct_s"] * 1e3
-    print(
-        f"Tracking benchmark on one video: {v['width']}x{v['height']} {v['codec']} (libx264 crf {sim.crf}, "
-        f"veryfast, grey in yuv420p), {n} frames at {v['fps']:g} fps, {r['video_mb']:.1f} MB;"
-    )
-    print(
-        f"  camera {r['camera']} of a simulated test (seed {sim.seed}, axial strain {sim.axial_strain:g} "
-        f"over the {n} frames), rendered in {r['render_s']:.0f} s ({r['render_s'] / n:.1f} s/frame, "
-        f"child peak {r['render_peak_mb']:.0f} MB)"
-    )
-    print(
-        f"  {r['labelled']} targets labelled in frame 0 ({r['detections']} detections; label_frame "
-        f"{r['label_s']:.2f} s, once per chunk, not in the figures below); reported per frame: "
-        f"mean {per_frame.mean():.0f}, min {per_frame.min()}"
-    )
     t = r["truth"]
-    print(
-        f"  dots move {med_step:.2f} px/frame (median), up to {max_step:.2f} px/frame; our centroids vs the "
-        f"simulator's: median {t['median_px']:.3f} px, {t['wrong']} of {t['compared']} farther than 1 px"
-    )
-    print(
+    lines = [
+        f"Tracking benchmark on one video: {v['width']}x{v['height']} {v['codec']} (libx264 crf {sim.crf}, "
+        f"veryfast, grey in yuv420p), {n} frames at {v['fps']:g} fps, {r['video_mb']:.1f} MB",
+        f"  camera {r['camera']}, frames 0..{n - 1} of a simulated {sim.frames}-frame test (seed {sim.seed}; "
+        f"axial strain {sim.axial_strain:g} and bulge {sim.bulge_mm:g} mm at its end)",
+        f"  kit export, scene and rendering: {r['render_s']:.0f} s ({r['render_s'] / n:.1f} s/frame; in a "
+        f"child process, peak {r['render_peak_mb']:.0f} MB)",
+        f"  membrane dots move {med_step:.2f} px/frame (median), up to {max_step:.2f} px/frame (truth)",
+        f"  {r['labelled']} targets labelled in frame 0 ({r['detections']} detections; label_frame "
+        f"{r['label_s']:.2f} s, once per chunk, not in the figures below)",
+        f"  targets tracked (reported) per frame: mean {per_frame.mean():.0f}, min {per_frame.min()}; "
+        f"their centroids vs the simulator's: median {t['median_px']:.3f} px, "
+        f"{t['wrong']} of {t['compared']} farther than 1 px",
         f"  spacing to the nearest detection: median {np.median(r['spacing_px']):.1f} px, so the gate "
-        f"({track_gate():g} x spacing) is {r['search_range_px']:.1f} px (median)"
-    )
+        f"({track_gate():g} x spacing) is {r['search_range_px']:.1f} px (median)",
+    ]
+    print("\n".join(lines))
     print()
     rows = [
         ("Throughput (same video, same run; best of the repeats)", "", "", ""),
@@ -441,18 +472,18 @@ def print_tracking(r: dict, benchmarks: Path) -> None:
             "label_frame per frame",
             f"{r['brute_s'] * 1e3:.0f}",
             "ms/frame",
-            f"{r['brute_s'] / r['direct_s']:.0f} x tracking (mean of {r['held']} frames)",
+            f"{_times(r['brute_s'] / r['direct_s'])} tracking (mean of {r['held']} frames)",
         ),
         (
             "  detect_blobs alone",
             f"{r['detect_s'] * 1e3:.0f}",
             "ms/frame",
-            f"{r['detect_s'] / r['direct_s']:.0f} x tracking (mean of {n} frames)",
+            f"{_times(r['detect_s'] / r['direct_s'])} tracking (mean of {n} frames)",
         ),
     ]
     tp = r["trackpy"]
     if isinstance(tp, str):
-        rows.append(("trackpy.link", tp, "", ""))
+        rows.append(("trackpy.link", "-", "", f"{tp} (pip install -e '.[bench]')"))
     else:
         rows.append(
             (
@@ -470,7 +501,7 @@ def print_tracking(r: dict, benchmarks: Path) -> None:
                     f"trackpy.link, memory {memory}, search_range {r['search_range_px']:.1f} px",
                     f"{m['seconds'] * 1e3:.1f}",
                     "ms/frame",
-                    f"{m['seconds'] / r['direct_s']:.1f} x tracking (linking alone, no detection)",
+                    f"{_times(m['seconds'] / r['direct_s'])} tracking (linking alone, no detection)",
                 )
             )
             rows.append(
@@ -483,7 +514,12 @@ def print_tracking(r: dict, benchmarks: Path) -> None:
             )
     rows += [
         ("Peak memory", "", "", ""),
-        ("this process (ru_maxrss)", f"{r['maxrss_mb']:.0f}", "MB", "rendering ran in a child process"),
+        (
+            "this process (ru_maxrss)",
+            f"{r['maxrss_mb']:.0f}",
+            "MB",
+            "the whole run (rendering ran in a child process); Snakemake's max_rss is per job",
+        ),
     ]
     for stage, mb in r["peak_mb"].items():
         rows.append((f"  during {stage} (VmHWM)", f"{mb:.0f}", "MB", ""))
@@ -535,8 +571,10 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument(
         "--hold", type=int, default=6, help="tracking: frames held in memory for the direct timing"
     )
-    p.add_argument("--strain", type=float, default=0.05, help="tracking: axial strain over the clip")
-    p.add_argument("--repeat", type=int, default=2, help="tracking: runs of decode and pipeline (best taken)")
+    p.add_argument("--test-frames", type=int, default=100,
+                   help="tracking: the clip is the first --frames frames of a test this long (default 100, "
+                        "the workflow demo's: the dots move as fast per frame)")  # fmt: skip
+    p.add_argument("--repeat", type=int, default=3, help="tracking: runs of decode and pipeline (best taken)")
     p.add_argument("--benchmarks", type=Path, default=Path("benchmarks"),
                    help="tracking: Snakemake's benchmark folder (default ./benchmarks)")  # fmt: skip
     p.add_argument("--sizes", default="1280x720,1920x1080,3840x2160", help="simulate, identify: sizes")
@@ -550,7 +588,8 @@ def main(argv: list[str] | None = None) -> None:
     if "tracking" in args.what:
         w, h = args.size
         print_tracking(
-            bench_tracking(w, h, args.frames, args.hold, args.strain, repeat=args.repeat), args.benchmarks
+            bench_tracking(w, h, args.frames, args.hold, args.test_frames, repeat=args.repeat),
+            args.benchmarks,
         )
     sizes = [_size(size) for size in args.sizes.split(",")]
     for w, h in sizes if "identify" in args.what else []:

@@ -334,9 +334,10 @@ def score_tracking(
     known = np.isfinite(d)
     n_frames = observations["frame"].nunique()
     swaps = float((d[known] > tol.wrong_id_px).sum())
+    worst = float(np.max(d[known].to_numpy(), initial=0.0))
     rows = [
         _metric("id_swaps", f"all ({n_frames} frames)", swaps, tol.id_swaps, "observations", source),
-        _metric("observation_max_error", "all", float(np.max(d[known].to_numpy(), initial=0.0)), np.nan, "px", source),
+        _metric("observation_max_error", "all", worst, np.nan, "px", source),
         _metric("observation_median_error", "all", float(np.median(d[known])) if known.any() else np.nan,
                 np.nan, "px", source),
         _metric("observations_without_truth", "all", float((~known).sum()), np.nan, "observations", source),

@@ -35,9 +35,11 @@ from there each ID is carried forward without detecting or identifying the frame
 
 4. **Re-acquire**: a dropped target keeps a virtual position, moved by its neighbours' affine
    motion (or by its last velocity when too few neighbours are reported), and is measured again
-   in every later frame; it is reported again as soon as every check passes. After more than
-   ``MAX_BLIND_FRAMES`` frames unseen it also needs enough reported neighbours to pass the
-   ``drift`` check (else ``unconfirmed``): a position extrapolated blind is not trusted.
+   in every later frame; it is reported again as soon as every check passes, and only if enough
+   of its neighbours are reported for the ``drift`` check to vouch for it (else
+   ``unconfirmed``): a position extrapolated blind can sit on the next dot when the motion is
+   fast (in a frame the camera did not record, nothing is measured and the prediction simply
+   moves on).
 
 Pixels are distorted image coordinates in OpenCV's convention (the centre of the top-left pixel
 is (0, 0)); frames are test frames (``triaxtrack.frames``).
@@ -58,8 +60,9 @@ NEIGHBOURS = 12  # same-kind neighbours whose motion predicts a target's (local 
 MIN_FLOW_NEIGHBOURS = 4  # fewer reported neighbours: no flow check, velocity prediction
 MEAN_SHIFT_STEPS = 3  # re-centring steps of the disc; motion left after prediction is sub-pixel
 WHITE_PERCENTILE = 80.0  # the window's white level (dots cover well under 20 % of a window)
+FAR_NEIGHBOURS = 4.0  # x spacing: how far vouching neighbours are sought for a target found again
+CONFIRM_PASSES = 5  # rounds in which targets found again are confirmed by their neighbours
 VELOCITY_SMOOTHING = 0.5  # weight of the previous velocity (one noisy or biased frame moves it less)
-MAX_BLIND_FRAMES = 2  # a target found again after longer needs its neighbours' motion to confirm it
 REASONS = (
     "edge", "lost", "merged", "shape", "jump", "ambiguous", "drift", "unconfirmed", "disagrees",
     "not_recorded",
@@ -119,7 +122,7 @@ class _State:
     pred: np.ndarray  # (n, 2) where each target is expected in the next frame
     last_uv: np.ndarray  # (n, 2) where it was last reported
     last_vel: np.ndarray  # (n, 2) its velocity then, pixels per frame
-    blind: np.ndarray  # (n,) frames since it was last reported
+    blind: np.ndarray  # (n,) frames measured and not reported since it was last reported
 
 
 def _neighbours(uv: np.ndarray, kinds: np.ndarray) -> np.ndarray:
@@ -251,11 +254,14 @@ def measure_blobs(
     return out, area, mass, reason
 
 
-def _affine_flow(state: _State, disp: np.ndarray, ok: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _affine_flow(
+    state: _State, disp: np.ndarray, ok: np.ndarray, neighbours: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     """Each target's displacement predicted by the affine motion of its reported neighbours:
-    ``(pred (n, 2), valid (n,))`` from the displacements ``disp`` (n, 2) of the ``ok`` ones."""
+    ``(pred (n, 2), valid (n,))`` from the displacements ``disp`` (n, 2) of the ``ok`` ones.
+    ``neighbours`` (n, k) indices (n: none) replace the fixed ``state.neighbours``."""
     n = len(state.ids)
-    nb = state.neighbours
+    nb = state.neighbours if neighbours is None else neighbours
     pad_ok = np.r_[ok, False]
     pad_ref = np.vstack([state.ref_uv, np.zeros((1, 2))])
     pad_disp = np.vstack([np.where(ok[:, None], disp, 0.0), np.zeros((1, 2))])
@@ -271,12 +277,30 @@ def _affine_flow(state: _State, disp: np.ndarray, ok: np.ndarray) -> tuple[np.nd
     return sol[:, 2, :], valid
 
 
+def _vouchers(state: _State, vouch: np.ndarray, which: np.ndarray) -> np.ndarray:
+    """(n, NEIGHBOURS) neighbours of the targets ``which`` among the vouching ones of their kind,
+    within ``FAR_NEIGHBOURS`` times their spacing (index n: none); other rows empty."""
+    n = len(state.ids)
+    out = np.full((n, NEIGHBOURS), n, np.int64)
+    kinds = target_kind(state.ids)
+    for kind in np.unique(kinds[which]):
+        pool = np.nonzero(vouch & (kinds == kind) & np.isfinite(state.ref_uv).all(axis=1))[0]
+        rows = np.nonzero(which & (kinds == kind))[0]
+        if len(pool) == 0 or len(rows) == 0:
+            continue
+        k = min(NEIGHBOURS, len(pool))
+        d, j = cKDTree(state.ref_uv[pool]).query(np.nan_to_num(state.ref_uv[rows]), k=k)
+        d, j = d.reshape(len(rows), k), j.reshape(len(rows), k)
+        near = d <= FAR_NEIGHBOURS * state.spacing[rows, None]
+        out[rows, :k] = np.where(near, pool[np.minimum(j, len(pool) - 1)], n)
+    return out
+
+
 def _step(state: _State, gray: np.ndarray | None, cfg: TrackingConfig, first: bool) -> tuple:
     """Track one frame: returns (uv (n, 2), area (n,), reason (n,)) and advances the state."""
     n = len(state.ids)
-    if gray is None:
+    if gray is None:  # no picture: extrapolate; not a failed measurement, so blind stays as it is
         state.pred = state.pred + state.last_vel
-        state.blind = state.blind + 1
         return np.full((n, 2), np.nan), np.zeros(n), np.full(n, "not_recorded", dtype=object)
     pred = state.pred
     uv, area, mass, reason = measure_blobs(gray, pred, state.radius, cfg)
@@ -290,29 +314,51 @@ def _step(state: _State, gray: np.ndarray | None, cfg: TrackingConfig, first: bo
     reason[unmeasurable & (reason == "")] = "disagrees"
     measured = reason == ""
     change = np.abs(mass / state.ref_mass - 1)
-    step = np.abs(mass / state.last_mass - 1)
+    step = np.where(state.blind == 0, np.abs(mass / state.last_mass - 1), 0.0)  # since the last frame
     bad_shape = measured & ~((change <= cfg.mass_change) & (step <= cfg.mass_step))
     reason[bad_shape] = "shape"
     jump = measured & (np.linalg.norm(uv - pred, axis=1) > cfg.gate * state.spacing)
     reason[jump & (reason == "")] = "jump"
     cand = np.nonzero(reason == "")[0]
-    if len(cand) > 1:
-        pairs = cKDTree(uv[cand]).query_pairs(cfg.min_separation * float(np.min(state.spacing[cand])))
-        for a, b in pairs:
-            i, j = cand[a], cand[b]
-            if np.linalg.norm(uv[i] - uv[j]) < cfg.min_separation * min(state.spacing[i], state.spacing[j]):
-                reason[i] = reason[j] = "ambiguous"
+    if len(cand) > 1:  # two targets on one blob: both dropped
+        d, nearest = cKDTree(uv[cand]).query(uv[cand], k=2)
+        close = d[:, 1] < cfg.min_separation * state.spacing[cand]
+        reason[cand[close]] = "ambiguous"
+        reason[cand[nearest[close, 1]]] = "ambiguous"
+    # The flow check. Only targets reported in the previous frame too vouch for their
+    # neighbours at first: targets found again must not confirm one another (a whole region can
+    # lock one dot over at once); each one that passes then vouches in turn, so confirmation
+    # spreads from the steadily tracked targets into a region that reappears.
     ok = reason == ""
     disp = uv - state.ref_uv
-    flow, valid = _affine_flow(state, disp, ok)
-    drift = ok & valid & (np.linalg.norm(disp - flow, axis=1) > cfg.max_flow_residual_px)
+    vouch = ok & (state.blind == 0)
+    flow, valid = _affine_flow(state, disp, vouch)
+    drift = vouch & valid & (np.linalg.norm(disp - flow, axis=1) > cfg.max_flow_residual_px)
+    vouch &= ~drift
+    if drift.any():  # they must not steer their neighbours' flow
+        flow, valid = _affine_flow(state, disp, vouch)
+    pending = ok & (state.blind > 0)
+    for _ in range(CONFIRM_PASSES):
+        check = pending & valid
+        if not check.any():
+            break
+        off = check & (np.linalg.norm(disp - flow, axis=1) > cfg.max_flow_residual_px)
+        drift |= off
+        vouch |= check & ~off
+        pending &= ~check
+        flow, valid = _affine_flow(state, disp, vouch)
+    far = pending & np.isfinite(state.ref_uv).all(axis=1)
+    if far.any():  # no vouchers among its nearest: the nearest vouching ones within reach
+        far_flow, far_valid = _affine_flow(state, disp, vouch, _vouchers(state, vouch, far))
+        check = far & far_valid
+        off = check & (np.linalg.norm(disp - far_flow, axis=1) > cfg.max_flow_residual_px)
+        drift |= off
+        pending &= ~check
+        flow = np.where(check[:, None], far_flow, flow)
+        valid |= check
     reason[drift] = "drift"
-    # found again after more than MAX_BLIND_FRAMES, where no neighbours can vouch for it
-    unconfirmed = (reason == "") & ~valid & (state.blind > MAX_BLIND_FRAMES)
-    reason[unconfirmed] = "unconfirmed"
+    reason[pending] = "unconfirmed"  # found again, but no reported neighbours can vouch for it
     ok = reason == ""
-    if (drift | unconfirmed).any():  # they must not steer their neighbours' flow
-        flow, valid = _affine_flow(state, disp, ok)
     steady = ok & (state.blind == 0)
     vel = VELOCITY_SMOOTHING * state.last_vel + (1 - VELOCITY_SMOOTHING) * (uv - state.last_uv)
     state.last_vel = np.where(steady[:, None], vel, state.last_vel)
@@ -325,6 +371,8 @@ def _step(state: _State, gray: np.ndarray | None, cfg: TrackingConfig, first: bo
     blind_pred = state.last_uv + state.last_vel * (state.blind + 1)[:, None]
     virtual = np.where(valid[:, None], state.ref_uv + flow, blind_pred)
     virtual = np.where(np.isfinite(virtual), virtual, blind_pred)
+    # found but not yet confirmed: where it was found is the best guess
+    virtual = np.where((reason == "unconfirmed")[:, None], uv, virtual)
     state.pred = np.where(ok[:, None], uv + state.last_vel, virtual)
     return np.where(ok[:, None], uv, np.nan), area, reason
 
