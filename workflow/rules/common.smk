@@ -413,8 +413,10 @@ def get_timestep_motion(wildcards):
 def get_final_outputs():
     """Everything the default target builds: the kit; per simulated test its test folder and
     simulation_check.json; per recorded test its inventory.json; per test and camera its
-    calibration and frame map; per test the labels of every camera's chunk starts and the
-    first-frame reconstruction (cameras.json, points.parquet, quality.json and its picture).
+    calibration and frame map; per test the labels of every camera's chunk starts, the cameras
+    and cell of the first frame (cameras.json and a picture), every processed frame's points,
+    observations, tracks and quality.json, the volume and strains, a few PLY meshes, and the
+    report's figures and movie.
     """
     outputs = [KIT_DIR]
     for test in SIMULATED:
