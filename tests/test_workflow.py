@@ -208,7 +208,8 @@ def test_snakefmt_is_clean():
 
 def test_small_simulation_end_to_end_then_inventory(tmp_path):
     """Simulate a small test in a copy of the workflow and measure it: 13 cameras x 6 frames at
-    1280 x 720 (two chunks of 3 frames, 1 % axial strain), 8 board images each, tracked,
+    1280 x 720 (two chunks of 3 frames, 1 % axial strain: dots move up to 0.2 mm a frame), 8 board
+    images each, tracked,
     triangulated, meshed and reported; then take its folder as a recorded test and build its
     inventory. About 2 minutes on 2 cores."""
     from triaxtrack.score import score
@@ -220,8 +221,8 @@ def test_small_simulation_end_to_end_then_inventory(tmp_path):
     shutil.copytree(REPO / "config", work / "config")
     config = write_yaml(
         work / "small.yaml",
-        {"chunk_size": 3, "tests": [{"name": "small", "simulate": {"frames": 6, "calibration_images": 8,
-                                                                    "axial_strain": 0.01}}]},
+        {"chunk_size": 3, "tests": [{"name": "small", "simulate": {
+            "frames": 6, "calibration_images": 8, "axial_strain": 0.01, "axial_nonuniformity": 0.03}}]},
     )  # fmt: skip
     proc = run_snakemake("--cores", "2", "--configfile", str(config), workdir=work)
     assert proc.returncode == 0, proc.stdout + proc.stderr

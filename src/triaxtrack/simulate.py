@@ -105,6 +105,7 @@ class SimulationConfig:
     axial_strain: float = 0.05
     bulge_mm: float = 2.0
     shear_mm: float = 0.0
+    axial_nonuniformity: float = 0.3  # final k of the deformation: the lower part compresses more
     camera_radius_mm: float = 340.0
     camera_height_mm: float = 72.0
     focal_factor: float = 0.62  # focal length / image width (about 93 degrees across)
@@ -218,6 +219,7 @@ def deformation_for(cfg: SimulationConfig, design: dict) -> Deformation:
         axial_strain=cfg.axial_strain,
         bulge_mm=cfg.bulge_mm,
         shear_mm=cfg.shear_mm,
+        axial_nonuniformity=cfg.axial_nonuniformity,
     )
 
 
