@@ -77,7 +77,7 @@ def test_reported_dots_are_their_own(tracked):
     # sub-pixel accurate away from the bar (the renderer's dots are exact discs) ...
     assert np.median(err[clear]) < 0.03 and np.percentile(err[clear], 99) < 0.1
     # ... and a dot partly hidden by the bar is dropped before its centroid is far off
-    assert np.percentile(err[~clear], 99) < 0.75
+    assert np.percentile(err[~clear], 99) < 0.6
 
 
 def test_occluded_dots_are_dropped_and_picked_up_again(tracked):
@@ -97,9 +97,8 @@ def test_occluded_dots_are_dropped_and_picked_up_again(tracked):
     ids29, uv29 = truth_positions(FRAMES - 1)
     clear = set(ids29[(uv29[:, 0] < a - 4) | (uv29[:, 0] > b + 4)])
     back = hidden & clear & first
-    # picked up again when enough neighbours are reported to vouch for them (the dots just right
-    # of the bar's start have no tracked neighbours on their left: not all come back)
-    assert back and len(back & set(rep.loc[rep["frame"] == FRAMES - 1, "id"])) >= 0.6 * len(back)
+    # picked up again once reported neighbours vouch for them
+    assert back and back <= set(rep.loc[rep["frame"] == FRAMES - 1, "id"])
 
 
 def test_missing_frame_is_not_recorded_and_tracking_continues(tracked):

@@ -366,6 +366,9 @@ def score_volume(
     """Per processed frame: the volume's relative error (``volume_error``), the volume change's
     error over the true initial volume (``volume_change_error``) and the axial strain's error,
     cut down by :func:`summarise_frames`; a frame the results do not measure fails."""
+    missing = sorted(set(volume["frame"]) - set(truth["frame"]))
+    if missing:
+        raise ValueError(f"{source}: frames {missing[:5]} are not in the truth")
     m = truth.merge(volume, on="frame", how="inner", suffixes=("_true", ""))
     v0t = float(m["volume_mm3_true"].iloc[0]) if len(m) else np.nan
     v0 = float(m["volume_mm3"].iloc[0]) if len(m) else np.nan
@@ -381,13 +384,10 @@ def score_volume(
                     "", source),
         ]  # fmt: skip
     out = summarise_frames(pd.DataFrame(rows, columns=COLUMNS))
-    missing = sorted(set(volume["frame"]) - set(truth["frame"]))
     measured = int(np.isfinite(volume["volume_mm3"]).sum())
     share = float(measured) / max(len(volume), 1)
     row = _metric("frames_measured", "all", share, 1.0, "", source, minimum=True)
     out = pd.concat([out, pd.DataFrame([row], columns=COLUMNS)])
-    if missing:
-        raise ValueError(f"{source}: frames {missing[:5]} are not in the truth")
     return out.reset_index(drop=True)
 
 

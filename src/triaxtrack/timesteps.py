@@ -80,9 +80,9 @@ def triangulate_frames(
     points, residuals = [], []
     for frame in np.sort(np.asarray(frames)):
         obs = rep[rep["frame"] == frame][["camera", "frame", "id", "u_px", "v_px"]].reset_index(drop=True)
-        off = np.array([(c, int(frame)) in moved for c in obs["camera"]], bool)
         if len(obs) == 0:
             continue
+        off = np.array([(c, int(frame)) in moved for c in obs["camera"]], bool)
         res = triangulate_refracted(cameras, obs[~off], cell, cfg)
         points.append(res.points.assign(frame=int(frame), time_s=float(frame) / fps))
         dropped = obs[off].assign(du_px=np.nan, dv_px=np.nan, used=False, reason="camera moved")

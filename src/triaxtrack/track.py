@@ -303,15 +303,16 @@ def _step(state: _State, gray: np.ndarray | None, cfg: TrackingConfig, first: bo
         state.pred = state.pred + state.last_vel
         return np.full((n, 2), np.nan), np.zeros(n), np.full(n, "not_recorded", dtype=object)
     pred = state.pred
-    uv, area, mass, reason = measure_blobs(gray, pred, state.radius, cfg)
+    # targets left out of the chunk at its first frame are not measured again (NaN: 'lost')
+    probe = pred if first else np.where(np.isfinite(state.ref_mass)[:, None], pred, np.nan)
+    uv, area, mass, reason = measure_blobs(gray, probe, state.radius, cfg)
     if first:  # the tracker's centroid must agree with the detection's, or the target is left out
         agree = (reason == "") & (np.linalg.norm(uv - pred, axis=1) <= cfg.first_agreement_px)
         reason[(reason == "") & ~agree] = "disagrees"
         state.ref_uv = np.where(agree[:, None], uv, np.nan)
         state.ref_mass = np.where(agree, mass, np.nan)
         state.last_mass = state.ref_mass
-    unmeasurable = ~np.isfinite(state.ref_mass)
-    reason[unmeasurable & (reason == "")] = "disagrees"
+    reason[~np.isfinite(state.ref_mass)] = "disagrees"
     measured = reason == ""
     change = np.abs(mass / state.ref_mass - 1)
     step = np.where(state.blind == 0, np.abs(mass / state.last_mass - 1), 0.0)  # since the last frame
@@ -397,9 +398,9 @@ def track_frames(
     report = set(int(k) for k in report)
     parts = []
     for i, (k, gray) in enumerate(frames):
-        uv, area, reason = _step(state, gray, cfg, first=i == 0)
         if i == 0 and gray is None:
             raise ValueError(f"{camera}: no picture of the labelled frame {k}")
+        uv, area, reason = _step(state, gray, cfg, first=i == 0)
         if int(k) in report:
             parts.append(pd.DataFrame({
                 "camera": camera, "frame": int(k), "id": state.ids, "u_px": uv[:, 0], "v_px": uv[:, 1],
