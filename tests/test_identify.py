@@ -8,7 +8,7 @@ import pytest
 
 from triaxtrack.codes import bits_of
 from triaxtrack.detect import DetectParams, decode_coded_targets, detect_blobs
-from triaxtrack.identify import _Pool, grow_chain, label_frame
+from triaxtrack.identify import _Anchor, _membrane_row_ends, _Pool, grow_chain, label_frame, settle_offsets
 from triaxtrack.kit import coded_target_polygons, ct_codes, load_kit_design, target_table
 from triaxtrack.optics import read_cameras
 from triaxtrack.raster import paint
@@ -81,6 +81,55 @@ def test_chain_never_skips_a_missing_dot():
     assert max(labels) == 6
 
 
+def _line_pool(n: int) -> tuple[_Pool, np.ndarray]:
+    """n dots 10 px apart down a slightly curved line, all free."""
+    y = np.arange(n, dtype=float) * 10.0
+    pos = np.c_[0.005 * y**2, y]
+    blobs = pd.DataFrame({"area_px": 1.0, "background": 1.0, "roundness": 1.0}, index=range(n))
+    return _Pool(pos, np.ones(n, bool), blobs), pos
+
+
+def test_chain_walks_up_from_its_bottom_anchor():
+    """A longitudinal stripe anchored only at its bottom end (its top CT not decoded) is walked
+    up from there: the hint is the step into the anchor."""
+    pool, pos = _line_pool(12)
+    labels = grow_chain(
+        pool, {11: 11}, 12, cyclic=False, gate=0.3, step_hint={10: pos[11] - pos[10]}, max_bracket=2
+    )
+    assert labels == {i: i for i in range(12)}
+
+
+def test_dots_beside_a_dark_edge_are_flagged():
+    """A dot one clear pixel from a large dark region is beside an edge; dots near only other
+    dots, or far from everything, are not."""
+    img = np.full((80, 120), 200.0)
+    img[:, 90:] = 30.0  # the dark background beyond a silhouette
+    yy, xx = np.mgrid[0:80, 0:120]
+    for u, v in ((85.0, 40.0), (30.0, 20.0), (36.0, 20.0), (30.0, 60.0)):
+        img[(xx - u) ** 2 + (yy - v) ** 2 <= 2.2**2] = 30.0
+    blobs = detect_blobs(img.astype(np.uint8), DetectParams(background_px=16))
+    dots = blobs[(blobs.area_px < 40)].sort_values("u_px")
+    assert len(dots) == 4
+    assert dots.beside_edge.tolist() == [False, False, False, True]
+
+
+def test_membrane_row_ends():
+    """The first and last dot of each labelled run along a row (around the specimen) are ends."""
+    m = {"first_id": 1001, "rows": 60, "columns": 64}
+    ids = np.array([1001 + 64 * r + c for r in (9, 10) for c in (62, 63, 0, 1, 2)] + [131, -1])
+    ends = _membrane_row_ends(ids, m)
+    assert ends.tolist() == [True, False, False, False, True] * 2 + [False, False]
+
+
+def test_pedestal_ct_pairs_overrule_a_single_ct_but_nothing_else():
+    pair, single = _Anchor(1, (0, 0), (0, 0)), _Anchor(2, (0, 0), None)
+    assert settle_offsets({(44, 30): [pair, pair], (40, 30): [single]}) == (44, 30)
+    assert isinstance(settle_offsets({(44, 30): [pair], (40, 30): [single]}), str)
+    assert isinstance(settle_offsets({(44, 30): [pair, pair], (40, 30): [pair]}), str)
+    assert isinstance(settle_offsets({}), str)
+    assert settle_offsets({(40, 30): [single]}) == (40, 30)
+
+
 @pytest.fixture(scope="module")
 def hd_test(kit_dir, tmp_path_factory):
     """3 cameras x 2 frames at 1280 x 720 (the demo's size), 8 % axial strain at frame 1."""
@@ -104,8 +153,8 @@ def small_labels(hd_test, kit):
     return pd.concat(rows, ignore_index=True), cams
 
 
-# measured floor at 1280 x 720 (the issue asks 95 %: not reached, see the issue 3 note)
-COVERAGE_FLOOR = 0.85
+# measured floor at 1280 x 720: 0.93 (the issue asks 95 %: not reached everywhere, see the issue 3 note)
+COVERAGE_FLOOR = 0.92
 
 
 def test_labels_score_within_tolerances(hd_test, small_labels, kit):

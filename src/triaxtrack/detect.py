@@ -68,9 +68,10 @@ class DetectParams:
     ct_outer_white_fraction: float = 0.7  # share of the surround that must be white
 
 
+EDGE_RADIUS_PX = 3  # a dot with non-dot dark ink this close (L2, pixel centres) is beside an edge
 BLOB_COLUMNS = [
     "u_px", "v_px", "area_px", "major_px", "minor_px", "angle_rad", "roundness", "fill",
-    "contrast", "background", "cov_uu", "cov_uv", "cov_vv",
+    "contrast", "background", "cov_uu", "cov_uv", "cov_vv", "beside_edge",
 ]  # fmt: skip
 
 
@@ -127,13 +128,13 @@ def detect_blobs(gray: np.ndarray, params: DetectParams | None = None) -> pd.Dat
     bg = background(g, size)
     contrast = bg - g.astype(np.float32)
     ink = (contrast > np.maximum(p.min_contrast, p.ink_fraction * bg)).astype(np.uint8)
-    n, labels, stats, _ = cv2.connectedComponentsWithStats(ink, connectivity=8)
+    n, components, stats, _ = cv2.connectedComponentsWithStats(ink, connectivity=8)
     area = stats[:, cv2.CC_STAT_AREA].astype(np.float64)
     keep = (area >= p.min_area_px) & (area <= p.max_area_px)
     keep[0] = False
     lut = np.where(keep, np.arange(n), 0).astype(np.int32)
-    labels = lut[labels]
-    geo = _label_sums(labels, n)
+    labels = lut[components]
+    geo = _label_sums(components, n)
     # contrast-weighted centroid over the blob grown by one pixel (edge pixels partly covered)
     grown = cv2.dilate(labels.astype(np.float32), np.ones((3, 3), np.uint8)).astype(np.int32)
     grown = np.where(labels > 0, labels, grown)
@@ -142,14 +143,7 @@ def detect_blobs(gray: np.ndarray, params: DetectParams | None = None) -> pd.Dat
     idx = np.nonzero(keep)[0]
     m0 = geo["m0"][idx]
     mx, my = geo["x"][idx] / m0, geo["y"][idx] / m0
-    # moments of the union of unit pixels: point moments plus 1/12 per axis
-    cuu = geo["xx"][idx] / m0 - mx**2 + 1 / 12
-    cvv = geo["yy"][idx] / m0 - my**2 + 1 / 12
-    cuv = geo["xy"][idx] / m0 - mx * my
-    tr, det = cuu + cvv, cuu * cvv - cuv**2
-    disc = np.sqrt(np.maximum(tr**2 / 4 - det, 0))
-    l1, l2 = tr / 2 + disc, np.maximum(tr / 2 - disc, 1e-12)
-    major, minor = 4 * np.sqrt(l1), 4 * np.sqrt(l2)
+    cuu, cuv, cvv, major, minor = _ellipse(geo, idx)
     w0 = cen["m0"][idx]
     peak = np.zeros(n)
     np.maximum.at(peak, labels[labels > 0], contrast[labels > 0])
@@ -167,7 +161,44 @@ def detect_blobs(gray: np.ndarray, params: DetectParams | None = None) -> pd.Dat
         "cov_uu": cuu,
         "cov_uv": cuv,
         "cov_vv": cvv,
+        "beside_edge": _beside_edge(components, area, geo, p)[idx],
     })  # fmt: skip
+
+
+def _ellipse(sums: dict[str, np.ndarray], idx: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Second moments (cov_uu, cov_uv, cov_vv, px^2) and moment-ellipse axes (major, minor, px)
+    of components ``idx`` from their :func:`_label_sums` (union of unit pixels: the point moments
+    plus 1/12 per axis)."""
+    m0 = np.maximum(sums["m0"][idx], 1e-12)
+    mx, my = sums["x"][idx] / m0, sums["y"][idx] / m0
+    cuu = sums["xx"][idx] / m0 - mx**2 + 1 / 12
+    cvv = sums["yy"][idx] / m0 - my**2 + 1 / 12
+    cuv = sums["xy"][idx] / m0 - mx * my
+    tr, det = cuu + cvv, cuu * cvv - cuv**2
+    disc = np.sqrt(np.maximum(tr**2 / 4 - det, 0))
+    l1, l2 = tr / 2 + disc, np.maximum(tr / 2 - disc, 1e-12)
+    return cuu, cuv, cvv, 4 * np.sqrt(l1), 4 * np.sqrt(l2)
+
+
+def _beside_edge(components: np.ndarray, area: np.ndarray, sums: dict, p: DetectParams) -> np.ndarray:
+    """Per ink component (``components``: the label image; ``area`` and ``sums``
+    (:func:`_label_sums`) per label): whether dark ink that is not dot-like lies within
+    ``EDGE_RADIUS_PX`` of it: a region too large, too thin or too ragged for a dot (the dark
+    background beyond a silhouette, a pedestal edge). Such a dot has the edge's blurred fringe in
+    its centroid window. Components smaller than ``min_area_px`` (noise) are never edges; an edge
+    component is beside itself."""
+    n = len(area)
+    *_, major, minor = _ellipse(sums, np.arange(n))
+    fill = area / (np.pi * major * minor / 4)
+    not_round = (minor / major < p.min_roundness) | (fill < p.min_fill) | (fill > p.max_fill)
+    edge = (area > p.max_area_px) | ((area >= p.min_area_px) & not_round)
+    edge[0] = False
+    if not edge.any():
+        return np.zeros(n, bool)
+    k = 2 * EDGE_RADIUS_PX + 1
+    near = cv2.dilate(edge[components].astype(np.uint8), cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (k, k)))
+    hit = components[(near > 0) & (components > 0)]
+    return np.bincount(hit, minlength=n) > 0
 
 
 def _pixel(x: np.ndarray, size: int) -> np.ndarray:

@@ -40,9 +40,9 @@ from triaxtrack.kit import eq1_dot_id
 
 UNLABELLED = -1
 FAR_PX = 1e9
-# membrane dots whose image comes this close (mm on the cell wall) to a longitudinal band may be
-# partly hidden by it, which biases their centroid: they are not labelled
-BAND_MARGIN_MM = 1.5
+# a membrane dot whose image comes within this of a longitudinal band's (beyond its moment
+# ellipse, where its blurred edge still darkens pixels) may be partly hidden: not labelled
+BAND_BLUR_PX = 1.0
 
 
 @dataclass(frozen=True)
@@ -55,8 +55,14 @@ class IdentifyParams:
     phase_margin: float = 0.12  # log-area margin of the large-dot phase over the next best
     min_region_dots: int = 12  # a membrane grid region smaller than this is left unlabelled
     row_tolerance: float = 1.2  # |row estimated from a pedestal CT - row assigned|, rows
-    min_label_area_px: float = 6.0  # smaller dots are detected but not labelled
+    # smaller dots are detected but not labelled: cell-wall dots are many and the reference for
+    # the cameras, so only the accurate ones; a membrane dot is the only measurement of its point
+    min_label_area_px: float = 8.0  # 6-7 px oblique stripe dots at 720p: 0.15-0.27 px off
+    min_membrane_area_px: float = 4.0
     min_label_roundness: float = 0.4  # dots seen more than about 70 degrees off their normal
+    # cell-wall dots seen more than 60 degrees off their normal: their centroid is off the true
+    # projection by up to 0.27 px (longitudinal stripes towards a silhouette, at 720p)
+    min_cell_roundness: float = 0.5
 
 
 def undistorted_jacobians(undistort, uv: np.ndarray, h: float = 0.5) -> np.ndarray:
@@ -393,7 +399,8 @@ def _label_cell_stripes(f: _Frame, pool: _Pool, centres: dict, design: dict, p: 
                 continue
             i = per * (c - cs["first_id"])
             anchors[i] = k
-            hints[i] = step
+            hints[i] = step  # to i + 1, and (evenly spaced) into i from i - 1
+            hints.setdefault((i - 1) % n, step)
             pool.free[k] = False
         labels = grow_chain(pool, anchors, n, cyclic=True, gate=p.gate, step_hint=hints)
         for i, k in labels.items():
@@ -417,28 +424,49 @@ def _label_longitudinal(f: _Frame, pool: _Pool, centres: dict, design: dict, p: 
             (ct_bottom, bottom["z"], n - 1, zb),
         ):
             dot = labelled.get(eq1_dot_id(ct_id, design))
-            if ct_id not in centres or dot is None:
+            if dot is None:
                 continue
-            down = (f.pos[dot] - centres[ct_id][0]) / offset  # pixels per mm down the cell
-            pred = centres[ct_id][0] + down * (ct_z - z)
+            if ct_id in centres:
+                down = (f.pos[dot] - centres[ct_id][0]) / offset  # pixels per mm down the cell
+            else:  # a CT seen too obliquely to decode: the direction down from its neighbour's
+                down = _neighbour_down(f, ct_id, centres, labelled, design)
+                if down is None:
+                    continue
+            pred = f.pos[dot] + down * (ct_z - offset - z)
             k = pool.unique_within(pred, p.anchor_gate * spacing_mm * np.linalg.norm(down))
             if k < 0:
                 continue
             anchors[index] = k
-            hints[index] = down * spacing_mm
+            # the step from index to index + 1 (grow_chain's convention), so from the bottom
+            # anchor it is the step into it: the walk goes up from there
+            hints[index if index == 0 else index - 1] = down * spacing_mm
             pool.free[k] = False
         labels = grow_chain(pool, anchors, n, cyclic=False, gate=p.gate, step_hint=hints, max_bracket=2)
         for i, k in labels.items():
             _assign(f, k, ls["first_id"] + i, ls["name"], 1.0 if i in anchors else 0.9)
 
 
-def _near_polyline(points: np.ndarray, line: np.ndarray, radius: np.ndarray) -> np.ndarray:
-    """Points within ``radius[k]`` of segment k of a polyline."""
+def _neighbour_down(f: _Frame, ct_id: int, centres: dict, labelled: dict, design: dict) -> np.ndarray | None:
+    """Pixels per mm down the cell at CT ``ct_id`` (not decoded) from the nearest decoded CT of
+    its stripe (one or two places along, the nearer first) whose Eq. 1 dot is labelled."""
+    stripe = next(s for s in design["cell_targets"]["ct_stripes"] if 0 <= ct_id - s["first_id"] < s["count"])
+    for step in (1, -1, 2, -2):
+        nb = stripe["first_id"] + (ct_id - stripe["first_id"] + step) % stripe["count"]
+        dot = labelled.get(eq1_dot_id(nb, design))
+        if nb in centres and dot is not None:
+            return (f.pos[dot] - centres[nb][0]) / design["cell_targets"]["dot_offset"]
+    return None
+
+
+def _near_polyline(
+    points: np.ndarray, line: np.ndarray, radius: np.ndarray, pad: np.ndarray | float = 0.0
+) -> np.ndarray:
+    """Points within ``radius[k] + pad`` of segment k of a polyline (``pad``: per point or one)."""
     out = np.zeros(len(points), bool)
     for a, b, r in zip(line[:-1], line[1:], radius, strict=True):
         ab = b - a
         t = np.clip(((points - a) @ ab) / max(ab @ ab, 1e-12), 0, 1)
-        out |= np.linalg.norm(points - (a + t[:, None] * ab), axis=1) < r
+        out |= np.linalg.norm(points - (a + t[:, None] * ab), axis=1) < r + pad
     return out
 
 
@@ -527,6 +555,7 @@ def _width_ratio(ellipse_map: np.ndarray, down: np.ndarray) -> float:
     )
 
 
+MIN_OVERRULING_PAIRS = 2  # pedestal CT pairs that agree on a region overrule single CTs
 MAX_TAN_PHI = 3.0  # beyond about 72 degrees off a CT's normal, its parallax is not trusted
 
 
@@ -805,11 +834,26 @@ def _membrane_region_offsets(grid, phase, anchors, pos, design, p, ctx):
         off = _anchor_offsets(an, grid, nodes, xy, phase, pos, design, p, ctx)
         if off is not None:
             offsets.setdefault(off, []).append(an)
+    return settle_offsets(offsets)
+
+
+def settle_offsets(offsets: dict[tuple[int, int], list[_Anchor]]) -> tuple[int, int] | str:
+    """The one (column, row) offset of a membrane region that its pedestal CTs support
+    (``offsets``: offset -> the anchors that read it), or the reason there is none.
+
+    A CT whose partner was not decoded reads its column from one end only, and towards a
+    silhouette it may read one large-dot column off: at least ``MIN_OVERRULING_PAIRS`` pairs that
+    agree overrule such CTs. Anything else that disagrees leaves the region unlabelled.
+    """
     if not offsets:
         return "no pedestal CT fixes this membrane region"
-    if len(offsets) > 1:
-        return "pedestal CTs disagree on this membrane region"
-    return next(iter(offsets))
+    if len(offsets) == 1:
+        return next(iter(offsets))
+    paired = {o: sum(a.top is not None and a.bottom is not None for a in ans) for o, ans in offsets.items()}
+    backed = [o for o, n in paired.items() if n]
+    if len(backed) == 1 and paired[backed[0]] >= MIN_OVERRULING_PAIRS:
+        return backed[0]
+    return "pedestal CTs disagree on this membrane region"
 
 
 def identify(
@@ -849,30 +893,39 @@ def identify(
     pool = _Pool(pos, candidates, blobs)
     _label_cell_stripes(f, pool, centres, design, p)
     _label_longitudinal(f, pool, centres, design, p)
-    # the white band of a longitudinal stripe hides the membrane behind it: nothing there is a
-    # membrane dot, so drop what remains near the stripe's labelled dots
+    # the white band of a longitudinal stripe hides the membrane behind it: a dot whose image
+    # reaches the band's (half its major axis and BAND_BLUR_PX from it) is partly hidden and its
+    # centroid is biased, so drop what remains there
     long_names = {s["name"] for s in design["cell_targets"]["longitudinal_stripes"]}
     for name in long_names:
         sel = np.nonzero(f.group == name)[0]
         if len(sel) >= 2:
             order = sel[np.argsort(f.ids[sel])]
             line = pos[order]
-            seg = np.linalg.norm(np.diff(line, axis=0), axis=1)
+            # pixels per mm across the band at each stripe dot: its minor axis (the band is
+            # foreshortened across, towards a silhouette, never along)
+            across = blobs.minor_px.to_numpy()[order] / design["cell_targets"]["longitudinal_dot_diameter"]
             half = design["cell_targets"]["longitudinal_band_width"] / 2
-            spacing_mm = (
-                design["cell_targets"]["longitudinal_z_top"] - design["cell_targets"]["longitudinal_z_bottom"]
-            ) / (design["cell_targets"]["longitudinal_stripes"][0]["count"] - 1)
-            gaps = np.diff(f.ids[order])
-            radius = seg / np.maximum(gaps, 1) / spacing_mm * (half + BAND_MARGIN_MM)
-            hide = _near_polyline(pos, line, radius) & pool.free
+            radius = half * np.maximum(across[:-1], across[1:])
+            pad = blobs.major_px.to_numpy() / 2 + BAND_BLUR_PX
+            hide = _near_polyline(pos, line, radius, pad) & pool.free
             pool.free[hide] = False
             f.reason[hide] = "on a longitudinal stripe's band"
     _label_membrane(f, pool, centres, design, p)
-    # a dot too small or seen too obliquely has no accurate centroid: not reported
+    # a dot too small or seen too obliquely has no accurate centroid: not reported; nor has the
+    # last dot of a membrane row beside a dark edge (a silhouette or a band's shadow), whose blob
+    # takes in the edge's fringe (up to 1.4 px off on the demo), while the end rows along the
+    # pedestal faces keep theirs
+    m = design["membrane"]
+    membrane = (f.ids >= m["first_id"]) & (f.ids < m["first_id"] + m["rows"] * m["columns"])
     for bad, why in (
-        (blobs.area_px.to_numpy() < p.min_label_area_px, "too small for an accurate centroid"),
-        (blobs.roundness.to_numpy() < p.min_label_roundness, "seen too obliquely for an accurate centroid"),
-    ):
+        (blobs.area_px.to_numpy() < np.where(membrane, p.min_membrane_area_px, p.min_label_area_px),
+         "too small for an accurate centroid"),
+        (blobs.roundness.to_numpy() < np.where(membrane, p.min_label_roundness, p.min_cell_roundness),
+         "seen too obliquely for an accurate centroid"),
+        (_membrane_row_ends(f.ids, m) & blobs.beside_edge.to_numpy(bool),
+         "last of its membrane row, beside a dark edge"),
+    ):  # fmt: skip
         bad &= f.ids != UNLABELLED
         f.ids[bad] = UNLABELLED
         f.reason[bad] = why
@@ -893,6 +946,21 @@ def identify(
         "quality": f.quality[sel], "reason": f.reason[sel],
     })  # fmt: skip
     return pd.concat([ct_rows, dot_rows], ignore_index=True)[LABEL_COLUMNS]
+
+
+def _membrane_row_ends(ids: np.ndarray, m: dict) -> np.ndarray:
+    """Which of ``ids`` are membrane dots whose row neighbour on either side (column c - 1 or
+    c + 1, around the specimen) is not among ``ids``."""
+    ids = np.asarray(ids, np.int64)
+    k = ids - m["first_id"]
+    member = (k >= 0) & (k < m["rows"] * m["columns"])
+    row, col = k // m["columns"], k % m["columns"]
+    present = set(ids[member].tolist())
+    out = np.zeros(len(ids), bool)
+    for s in (-1, 1):
+        nb = row * m["columns"] + (col + s) % m["columns"] + m["first_id"]
+        out |= member & ~np.isin(nb, list(present))
+    return out
 
 
 def undistorted_pixels(camera) -> callable:
