@@ -97,8 +97,8 @@ def test_export_files(kit_dir, table):
         assert img.shape == (s["texture_size"][1], s["texture_size"][0], 4) and img.dtype == np.uint8
         assert (kit_dir / "sheets" / f"{s['name']}.svg").read_text().count("check bar") == 1
     board = json.loads((kit_dir / "board.json").read_text())
-    assert board["type"] == "checkerboard" and board["inner_corners"] == [9, 6]
-    assert cv2.imread(str(kit_dir / "board.png")).shape[:2] == (1800, 2400)
+    assert board["type"] == "checkerboard" and board["inner_corners"] == [15, 10]
+    assert cv2.imread(str(kit_dir / "board.png")).shape[:2] == (1775, 2400)  # (137.5 + 40) x (200 + 40) mm
     assert (kit_dir / "README.md").exists()
     assert len(kit["coded_target"]["codes"]) == 92
 

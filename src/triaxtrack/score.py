@@ -87,14 +87,44 @@ def pixel_grid(width: int, height: int, step_px: int = UNDISTORTION_GRID_PX) -> 
     return np.c_[uu.ravel(), vv.ravel()].astype(np.float64)
 
 
-def undistortion_map_error(est: Camera, truth: Camera, step_px: int = UNDISTORTION_GRID_PX) -> float:
-    """Largest difference, in pixels, between two cameras' undistortion maps over the image.
+def _undistorted_px(camera: Camera, uv_px: np.ndarray) -> np.ndarray:
+    """(N, 2) undistorted pixel positions ``K @ undistort(uv)`` of distorted pixels ``uv_px``
+    in the camera's own K (NaN where :func:`~triaxtrack.optics.pixels_to_normalized` fails)."""
+    xy = pixels_to_normalized(camera, uv_px)
+    return xy @ camera.K[:2, :2].T + camera.K[:2, 2]
 
-    For every pixel of :func:`pixel_grid` (the true camera's image), the undistorted normalised
+
+def undistortion_map_error(est: Camera, truth: Camera, step_px: int = UNDISTORTION_GRID_PX) -> float:
+    """Largest difference, in pixels, between two cameras' undistortion maps over the whole image.
+
+    A camera's undistortion map takes each pixel of its distorted image to where it lies in
+    the undistorted image with the same camera matrix: ``K @ undistort(uv)``, i.e.
+    ``cv2.undistortPoints(uv, K, dist, P=K)``, the inverse of the map that
+    ``cv2.initUndistortRectifyMap(K, dist, None, K)`` builds for ``cv2.remap``. Both maps are
+    evaluated at every pixel of :func:`pixel_grid` of the true image (its corners included,
+    which a remapped image of the same size would crop), each with its own K and distortion;
+    the result is the largest distance between the two undistorted positions. Errors of the
+    focal length, principal point and distortion count in it as far as they change where a
+    pixel maps to: a principal point shifted by p px (distortion unchanged, k1 = -0.3) moves
+    the map by ~0 at the image centre and by up to ~p at the image corners. The direction of
+    the ray through each pixel is :func:`ray_direction_error`. ``inf`` where either map
+    cannot be inverted (:func:`triaxtrack.optics.pixels_to_normalized`).
+    """
+    uv = pixel_grid(truth.width, truth.height, step_px)
+    err = np.linalg.norm(_undistorted_px(est, uv) - _undistorted_px(truth, uv), axis=1)
+    return float(err.max()) if np.isfinite(err).all() else float("inf")
+
+
+def ray_direction_error(est: Camera, truth: Camera, step_px: int = UNDISTORTION_GRID_PX) -> float:
+    """Largest difference between two cameras' ray directions through the pixels of the image,
+    in pixels of the true focal length (reported, not a pass limit).
+
+    For every pixel of :func:`pixel_grid` of the true image, the undistorted normalised
     coordinates under the estimated and the true K and distortion are compared; the difference
-    is scaled by the true focal lengths (fx for x, fy for y) to pixels. This is the error of the
-    ray direction through each pixel, so focal-length and principal-point errors count in it.
-    ``inf`` where either map cannot be inverted (:func:`triaxtrack.optics.pixels_to_normalized`).
+    is scaled by the true focal lengths (fx for x, fy for y). Unlike
+    :func:`undistortion_map_error`, the whole principal-point error counts in it at every
+    pixel (and a focal-length error grows towards the image edges), so it is what a pose or a
+    triangulation from these intrinsics sees. ``inf`` where either map cannot be inverted.
     """
     uv = pixel_grid(truth.width, truth.height, step_px)
     d = (pixels_to_normalized(est, uv) - pixels_to_normalized(truth, uv)) * [truth.K[0, 0], truth.K[1, 1]]
@@ -135,10 +165,11 @@ def score_calibrations(
     result: dict[str, Camera], truth: dict[str, Camera], tol: ScoreTolerances
 ) -> pd.DataFrame:
     """Per-camera errors of calibrated intrinsics (identity poses) against the true cameras:
-    ``focal_rel_error``, ``principal_point_error`` and ``undistortion_map_error``
-    (:func:`undistortion_map_error`). A calibration whose image size is not the true camera's
-    gets a failing ``image_size_mismatch`` row instead of the map error; cameras missing from,
-    or unknown to, the truth fail."""
+    ``focal_rel_error``, ``principal_point_error``, ``undistortion_map_error``
+    (:func:`undistortion_map_error`, tolerance ``undistortion_px``) and, reported only,
+    ``ray_direction_error`` (:func:`ray_direction_error`). A calibration whose image size is not
+    the true camera's gets a failing ``image_size_mismatch`` row instead of the two map rows;
+    cameras missing from, or unknown to, the truth fail."""
     df = score_cameras(result, truth, tol)
     df["source"] = "calibration/" + df["item"] + ".json"
     rows = []
@@ -152,6 +183,9 @@ def score_calibrations(
             continue
         err = undistortion_map_error(cam, tr)
         rows.append(_metric("undistortion_map_error", name, err, tol.undistortion_px, "px", source))
+        rows.append(
+            _metric("ray_direction_error", name, ray_direction_error(cam, tr), unit="px", source=source)
+        )
     out = pd.concat([df, pd.DataFrame(rows, columns=COLUMNS)], ignore_index=True)
     order = {"camera_unknown": 0, "focal_rel_error": 1, "principal_point_error": 2}
     key = out.metric.map(order).fillna(3)
