@@ -57,9 +57,9 @@ class IdentifyParams:
     row_tolerance: float = 1.2  # |row estimated from a pedestal CT - row assigned|, rows
     # smaller dots are detected but not labelled: cell-wall dots are many and the reference for
     # the cameras, so only the accurate ones; a membrane dot is the only measurement of its point
-    min_label_area_px: float = 8.0  # 6-7 px oblique stripe dots at 720p: 0.15-0.27 px off
+    min_cell_area_px: float = 8.0  # 6-7 px oblique stripe dots at 720p: 0.15-0.27 px off
     min_membrane_area_px: float = 4.0
-    min_label_roundness: float = 0.4  # dots seen more than about 70 degrees off their normal
+    min_membrane_roundness: float = 0.4  # dots seen more than about 70 degrees off their normal
     # cell-wall dots seen more than 60 degrees off their normal: their centroid is off the true
     # projection by up to 0.27 px (longitudinal stripes towards a silhouette, at 720p)
     min_cell_roundness: float = 0.5
@@ -913,15 +913,15 @@ def identify(
             f.reason[hide] = "on a longitudinal stripe's band"
     _label_membrane(f, pool, centres, design, p)
     # a dot too small or seen too obliquely has no accurate centroid: not reported; nor has the
-    # last dot of a membrane row beside a dark edge (a silhouette or a band's shadow), whose blob
+    # last dot of a membrane row beside a dark edge (a silhouette, a pedestal edge), whose blob
     # takes in the edge's fringe (up to 1.4 px off on the demo), while the end rows along the
     # pedestal faces keep theirs
     m = design["membrane"]
-    membrane = (f.ids >= m["first_id"]) & (f.ids < m["first_id"] + m["rows"] * m["columns"])
+    membrane = _is_membrane(f.ids, m)
     for bad, why in (
-        (blobs.area_px.to_numpy() < np.where(membrane, p.min_membrane_area_px, p.min_label_area_px),
+        (blobs.area_px.to_numpy() < np.where(membrane, p.min_membrane_area_px, p.min_cell_area_px),
          "too small for an accurate centroid"),
-        (blobs.roundness.to_numpy() < np.where(membrane, p.min_label_roundness, p.min_cell_roundness),
+        (blobs.roundness.to_numpy() < np.where(membrane, p.min_membrane_roundness, p.min_cell_roundness),
          "seen too obliquely for an accurate centroid"),
         (_membrane_row_ends(f.ids, m) & blobs.beside_edge.to_numpy(bool),
          "last of its membrane row, beside a dark edge"),
@@ -948,18 +948,23 @@ def identify(
     return pd.concat([ct_rows, dot_rows], ignore_index=True)[LABEL_COLUMNS]
 
 
+def _is_membrane(ids: np.ndarray, m: dict) -> np.ndarray:
+    """Which of ``ids`` are membrane dot IDs (Eq. 4) of the design's membrane ``m``."""
+    k = np.asarray(ids, np.int64) - m["first_id"]
+    return (k >= 0) & (k < m["rows"] * m["columns"])
+
+
 def _membrane_row_ends(ids: np.ndarray, m: dict) -> np.ndarray:
     """Which of ``ids`` are membrane dots whose row neighbour on either side (column c - 1 or
     c + 1, around the specimen) is not among ``ids``."""
     ids = np.asarray(ids, np.int64)
+    member = _is_membrane(ids, m)
     k = ids - m["first_id"]
-    member = (k >= 0) & (k < m["rows"] * m["columns"])
     row, col = k // m["columns"], k % m["columns"]
-    present = set(ids[member].tolist())
     out = np.zeros(len(ids), bool)
     for s in (-1, 1):
         nb = row * m["columns"] + (col + s) % m["columns"] + m["first_id"]
-        out |= member & ~np.isin(nb, list(present))
+        out |= member & ~np.isin(nb, ids[member])
     return out
 
 

@@ -667,7 +667,7 @@ def _tilted_rotation(rng: np.random.Generator) -> np.ndarray:
     )
 
 
-def _viewed_obliquely(R: np.ndarray, t: np.ndarray, centre: np.ndarray) -> bool:
+def _within_view_angle(R: np.ndarray, t: np.ndarray, centre: np.ndarray) -> bool:
     """True when the board's normal is within ``BOARD_MAX_VIEW_DEG`` of the line of sight to
     ``centre`` (a board point, mm)."""
     to_board = R @ centre + t
@@ -713,7 +713,7 @@ def _whole_board_pose(
     pc = sheet_mm @ R.T + t
     if (
         (pc[:, 2] > 50).all()
-        and _viewed_obliquely(R, t, centre)
+        and _within_view_angle(R, t, centre)
         and np.isfinite(uv).all()
         and (uv >= 10).all()
         and (uv[:, 0] <= w - 11).all()
@@ -769,7 +769,7 @@ def _corner_board_pose(
         and seen.sum() >= BOARD_CORNER_MIN_SEEN
         and lines >= BOARD_CORNER_MIN_LINES
         and ((sheet_mm @ R.T + t)[:, 2] > 50).all()
-        and _viewed_obliquely(R, t, anchor)
+        and _within_view_angle(R, t, anchor)
     ):
         return R, t
     return None

@@ -143,7 +143,8 @@ TRACKS = Schema(
 labelled at the chunk's first recorded frame, per processed frame of the chunk (and the frame
 the chunk shares with the next one); ``u_px, v_px`` the distorted centroid (NaN where the target
 is not reported), ``area_px`` its blob's area, ``reason`` '' when reported, else why not
-('lost', 'edge', 'merged', 'jump', 'shape', 'ambiguous', 'not_recorded')."""
+('edge', 'lost', 'merged', 'shape', 'jump', 'ambiguous', 'drift', 'unconfirmed',
+'disagrees', 'not_recorded': :mod:`triaxtrack.track`)."""
 
 STRAINS = Schema(
     "strains",
