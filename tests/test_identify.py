@@ -8,7 +8,17 @@ import pytest
 
 from triaxtrack.codes import bits_of
 from triaxtrack.detect import DetectParams, decode_coded_targets, detect_blobs
-from triaxtrack.identify import _Anchor, _membrane_row_ends, _Pool, grow_chain, label_frame, settle_offsets
+from triaxtrack.identify import (
+    IdentifyParams,
+    _Anchor,
+    _bridge,
+    _grid_phase,
+    _membrane_row_ends,
+    _Pool,
+    grow_chain,
+    label_frame,
+    settle_offsets,
+)
 from triaxtrack.kit import coded_target_polygons, ct_codes, load_kit_design, target_table
 from triaxtrack.optics import read_cameras
 from triaxtrack.raster import paint
@@ -130,6 +140,44 @@ def test_pedestal_ct_pairs_overrule_a_single_ct_but_nothing_else():
     assert settle_offsets({(40, 30): [single]}) == (40, 30)
 
 
+def _membrane_patch(rows, cols, r_shift: int, c_shift: int, pos: list) -> dict:
+    """A grid region over membrane ``rows`` x ``cols`` (1-based), its nodes numbered from the
+    shifts (node (i, j) is row i + r_shift, column j + c_shift); rows image as arcs bending down
+    by 0.01 px / px^2 away from x = 150, columns 10 px apart, rows 8 px apart."""
+    grid = {}
+    for r in rows:
+        for c in cols:
+            x = 10.0 * c
+            grid[(r - r_shift, c - c_shift)] = len(pos)
+            pos.append((x, 8.0 * r + 0.01 * (x - 150.0) ** 2))
+    return grid
+
+
+def test_region_beyond_a_band_is_fixed_along_curved_rows(kit):
+    """Rows image as arcs: across a band hiding three columns they drop 4.8 px (0.6 rows) more
+    at one facing column than at the other, which a straight match across cannot pair. Each
+    row's tangent, extrapolated to the middle of the gap from both sides, pairs them."""
+    design = kit[0]
+    m = design["membrane"]
+    pos = []
+    fixed = _membrane_patch(range(5, 26), range(10, 20), 0, 0, pos)  # offsets (0, 0): node = (r, c)
+    beyond = _membrane_patch(range(5, 26), range(23, 27), 3, 20, pos)
+    phase = ((m["large_first"] - 3) % m["large_step"], (m["large_first"] - 20) % m["large_step"])
+    got = _bridge(beyond, phase, fixed, (0, 0), np.asarray(pos), np.array([0.0, 1.0]), design)
+    assert got == (20, 3)
+
+
+def test_larger_dots_found_where_dot_size_falls_across_the_region():
+    """Three columns towards a silhouette, each dot 0.6 times the area of the one before it, the
+    larger dots 1.6 times a small dot's area: the phase is still the larger dots' one."""
+    grid, area = {}, []
+    for i in range(24):
+        for j in range(3):
+            grid[(i, j)] = len(area)
+            area.append(20.0 * 0.6**j * (1.6 if (i % 4, j % 4) == (1, 2) else 1.0))
+    assert _grid_phase(grid, np.asarray(area), IdentifyParams()) == (1, 2)
+
+
 @pytest.fixture(scope="module")
 def hd_test(kit_dir, tmp_path_factory):
     """3 cameras x 2 frames at 1280 x 720 (the demo's size), 8 % axial strain at frame 1."""
@@ -153,18 +201,14 @@ def small_labels(hd_test, kit):
     return pd.concat(rows, ignore_index=True), cams
 
 
-# measured floor at 1280 x 720: 0.93 (the issue asks 95 %: not reached everywhere, see the issue 3 note)
-COVERAGE_FLOOR = 0.92
-
-
 def test_labels_score_within_tolerances(hd_test, small_labels, kit):
-    """Zero wrong IDs; cell-wall centroids within 0.05 / 0.15 px; coverage above the floor."""
+    """Zero wrong IDs; cell-wall centroids within 0.05 / 0.15 px; coverage at least 95 %
+    (measured 0.952-0.984 on these six camera-frames)."""
     design, table, _ = kit
     labels, cams = small_labels
     obs = pd.read_parquet(hd_test / "truth" / "observations.parquet")
     points = pd.read_parquet(hd_test / "truth" / "points.parquet")
-    tol = ScoreTolerances(coverage=COVERAGE_FLOOR)
-    df = score_identification(labels, obs, points, cams, table, design, tol)
+    df = score_identification(labels, obs, points, cams, table, design, ScoreTolerances())
     assert set(df.metric) >= {"wrong_ids", "coverage", "cell_centroid_median", "cell_centroid_p95"}
     assert len(df[df.metric == "wrong_ids"]) == 6  # 3 cameras x 2 frames
     bad = df[~df.passed]

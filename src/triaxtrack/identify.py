@@ -55,14 +55,18 @@ class IdentifyParams:
     phase_margin: float = 0.12  # log-area margin of the large-dot phase over the next best
     min_region_dots: int = 12  # a membrane grid region smaller than this is left unlabelled
     row_tolerance: float = 1.2  # |row estimated from a pedestal CT - row assigned|, rows
-    # smaller dots are detected but not labelled: cell-wall dots are many and the reference for
-    # the cameras, so only the accurate ones; a membrane dot is the only measurement of its point
-    min_cell_area_px: float = 8.0  # 6-7 px oblique stripe dots at 720p: 0.15-0.27 px off
+    # smaller or more oblique dots are detected but not labelled, where their centroid is not
+    # accurate. A dot beside a dark edge (the dark beyond a band's or a label's edge, towards a
+    # silhouette) takes in the edge's blurred fringe: oblique 6-7 px stripe dots at 720p were
+    # 0.15-0.27 px off, so cell-wall dots there need a larger, rounder image. Clear of an edge,
+    # dots down to the detection limits (4 px, roundness 0.2) were within 0.1 px at the 95th
+    # percentile on four tests, cell-wall and membrane dots alike
+    min_cell_area_px: float = 8.0  # beside an edge
+    min_cell_roundness: float = 0.5  # beside an edge
+    min_clear_cell_area_px: float = 4.0
+    min_clear_cell_roundness: float = 0.3
     min_membrane_area_px: float = 4.0
-    min_membrane_roundness: float = 0.4  # dots seen more than about 70 degrees off their normal
-    # cell-wall dots seen more than 60 degrees off their normal: their centroid is off the true
-    # projection by up to 0.27 px (longitudinal stripes towards a silhouette, at 720p)
-    min_cell_roundness: float = 0.5
+    min_membrane_roundness: float = 0.2
 
 
 def undistorted_jacobians(undistort, uv: np.ndarray, h: float = 0.5) -> np.ndarray:
@@ -504,8 +508,14 @@ def _grid_phase(grid: dict, area: np.ndarray, p: IdentifyParams) -> tuple[int, i
     sums = np.zeros((4, 4))
     counts = np.zeros((4, 4))
     for (i, j), v in la.items():
-        nb = [la[(i + di, j + dj)] for di, dj in NEIGHBOURS if (i + di, j + dj) in la]
-        if len(nb) >= 2:
+        # only opposite neighbours in pairs: the dots' size changes across the image (towards a
+        # silhouette, along the axis) and a pair's mean cancels that change to first order
+        nb = [
+            0.5 * (la[(i - di, j - dj)] + la[(i + di, j + dj)])
+            for di, dj in ((1, 0), (0, 1))
+            if (i - di, j - dj) in la and (i + di, j + dj) in la
+        ]
+        if nb:
             sums[i % 4, j % 4] += v - np.mean(nb)
             counts[i % 4, j % 4] += 1
     mean = np.where(counts > 0, sums / np.maximum(counts, 1), -np.inf)
@@ -685,19 +695,23 @@ def _bridge(grid, phase, other, other_off, pos, axis, design) -> tuple[int, int]
     ja2, jb2 = ja + int(side), jb - int(side)  # one column further in, to measure the spacing
     if ja2 not in a_col or jb2 not in b_col:
         return None
-    sa = {int(i): p for (i, j), p in zip(a_nodes, a_xy, strict=True) if j == ja}
-    sb = {int(i): p for (i, j), p in zip(b_nodes, b_xy, strict=True) if j == jb}
-    if len(sa) < 5 or len(sb) < 5:
+    # each row's facing dot and its slope there (from the next column in), extrapolated to the
+    # middle of the gap from both sides: a row images as an arc, and extrapolating its tangent
+    # by the same distance from either side cancels the arc's curvature
+    mid = 0.5 * (a_col[ja] + b_col[jb])
+    za = _row_ends(grid, pos, ja, ja2, axis, right, mid)
+    zb_map = _row_ends(other, pos, jb, jb2, axis, right, mid)
+    if len(za) < 5 or len(zb_map) < 5:
         return None
-    ib = np.array(list(sb))
-    zb = np.array([sb[i] @ axis for i in ib])
+    ib = np.array(list(zb_map))
+    zb = np.array([zb_map[i][0] for i in ib])
     pitch = np.median(np.abs(np.diff(zb[np.argsort(ib)])))
     shifts, gaps = [], []
-    for i, pa in sa.items():
-        k = int(np.argmin(np.abs(zb - pa @ axis)))
-        if abs(zb[k] - pa @ axis) < 0.35 * pitch:
+    for i, (z, gap_a) in za.items():
+        k = int(np.argmin(np.abs(zb - z)))
+        if abs(zb[k] - z) < 0.35 * pitch:
             shifts.append(int(ib[k]) - i)
-            gaps.append(abs((pa - sb[int(ib[k])]) @ right))
+            gaps.append(gap_a + zb_map[int(ib[k])][1])
     if len(shifts) < 5:
         return None
     values, counts = np.unique(shifts, return_counts=True)
@@ -720,6 +734,24 @@ def _bridge(grid, phase, other, other_off, pos, axis, design) -> tuple[int, int]
         return None
     c_off = int((c_b + side * fits[0] - ja) % m["columns"])
     return c_off, r_off
+
+
+def _row_ends(
+    grid: dict, pos: np.ndarray, j: int, j2: int, axis: np.ndarray, right: np.ndarray, mid: float
+) -> dict[int, tuple[float, float]]:
+    """Row -> (position along ``axis`` extrapolated to ``mid`` across it, distance across from
+    column ``j``'s dot to ``mid``) for the rows with dots in columns ``j`` and ``j2``."""
+    out = {}
+    for (i, jj), k in grid.items():
+        if jj != j or (i, j2) not in grid:
+            continue
+        p, q = pos[k], pos[grid[(i, j2)]]
+        dr = (p - q) @ right
+        if abs(dr) < 1e-9:
+            continue
+        slope = ((p - q) @ axis) / dr
+        out[int(i)] = (float(p @ axis + slope * (mid - p @ right)), abs(mid - p @ right))
+    return out
 
 
 def _grid_ids(grid: dict, c_off: int, r_off: int, m: dict) -> dict:
@@ -912,18 +944,22 @@ def identify(
             pool.free[hide] = False
             f.reason[hide] = "on a longitudinal stripe's band"
     _label_membrane(f, pool, centres, design, p)
-    # a dot too small or seen too obliquely has no accurate centroid: not reported; nor has the
-    # last dot of a membrane row beside a dark edge (a silhouette, a pedestal edge), whose blob
-    # takes in the edge's fringe (up to 1.4 px off on the demo), while the end rows along the
-    # pedestal faces keep theirs
+    # a dot too small or seen too obliquely for its place (see IdentifyParams: cell-wall dots
+    # beside a dark edge need more) has no accurate centroid: not reported; nor has the last dot
+    # of a membrane row beside a dark edge (a silhouette, a pedestal edge), whose blob takes in
+    # the edge's fringe (up to 1.4 px off on the demo), while the end rows along the pedestal
+    # faces keep theirs
     m = design["membrane"]
     membrane = _is_membrane(f.ids, m)
+    edge = blobs.beside_edge.to_numpy(bool)
+    cell_area = np.where(edge, p.min_cell_area_px, p.min_clear_cell_area_px)
+    cell_round = np.where(edge, p.min_cell_roundness, p.min_clear_cell_roundness)
     for bad, why in (
-        (blobs.area_px.to_numpy() < np.where(membrane, p.min_membrane_area_px, p.min_cell_area_px),
+        (blobs.area_px.to_numpy() < np.where(membrane, p.min_membrane_area_px, cell_area),
          "too small for an accurate centroid"),
-        (blobs.roundness.to_numpy() < np.where(membrane, p.min_membrane_roundness, p.min_cell_roundness),
+        (blobs.roundness.to_numpy() < np.where(membrane, p.min_membrane_roundness, cell_round),
          "seen too obliquely for an accurate centroid"),
-        (_membrane_row_ends(f.ids, m) & blobs.beside_edge.to_numpy(bool),
+        (_membrane_row_ends(f.ids, m) & edge,
          "last of its membrane row, beside a dark edge"),
     ):  # fmt: skip
         bad &= f.ids != UNLABELLED
