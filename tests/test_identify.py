@@ -154,9 +154,9 @@ def _membrane_patch(rows, cols, r_shift: int, c_shift: int, pos: list) -> dict:
 
 
 def test_region_beyond_a_band_is_fixed_along_curved_rows(kit):
-    """Rows image as arcs: across a band hiding three columns they drop 4.8 px (0.6 rows) more
-    at one facing column than at the other, which a straight match across cannot pair. Each
-    row's tangent, extrapolated to the middle of the gap from both sides, pairs them."""
+    """Rows image as arcs: across a band hiding three columns, a row lies 48 px (6 rows) lower at
+    one facing column than at the other, so a straight match across pairs the wrong rows. Each
+    row's tangent, extrapolated to the middle of the gap from both sides, pairs the right ones."""
     design = kit[0]
     m = design["membrane"]
     pos = []
