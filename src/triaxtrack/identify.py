@@ -59,12 +59,14 @@ class IdentifyParams:
     # accurate. A dot beside a dark edge (the dark beyond a band's or a label's edge, towards a
     # silhouette) takes in the edge's blurred fringe: oblique 6-7 px stripe dots at 720p were
     # 0.15-0.27 px off, so cell-wall dots there need a larger, rounder image. Clear of an edge,
-    # dots down to the detection limits (4 px, roundness 0.2) were within 0.1 px at the 95th
-    # percentile on four tests, cell-wall and membrane dots alike
+    # dots down to 4 px were within 0.1 px at the 95th percentile on four tests, membrane dots at
+    # any roundness, cell-wall dots down to 0.3; but a cell-wall dot on the sliver of a ring's
+    # label at the cell's silhouette (roundness 0.32-0.38, its edge not flagged) was 0.4-1.0 px
+    # off, so those stop at 0.4
     min_cell_area_px: float = 8.0  # beside an edge
     min_cell_roundness: float = 0.5  # beside an edge
     min_clear_cell_area_px: float = 4.0
-    min_clear_cell_roundness: float = 0.3
+    min_clear_cell_roundness: float = 0.4
     min_membrane_area_px: float = 4.0
     min_membrane_roundness: float = 0.2
 
