@@ -701,19 +701,19 @@ def _bridge(grid, phase, other, other_off, pos, axis, design) -> tuple[int, int]
     # middle of the gap from both sides: a row images as an arc, and extrapolating its tangent
     # by the same distance from either side cancels the arc's curvature
     mid = 0.5 * (a_col[ja] + b_col[jb])
-    za = _row_ends(grid, pos, ja, ja2, axis, right, mid)
-    zb_map = _row_ends(other, pos, jb, jb2, axis, right, mid)
-    if len(za) < 5 or len(zb_map) < 5:
+    ends_a = _row_ends(grid, pos, ja, ja2, axis, right, mid)
+    ends_b = _row_ends(other, pos, jb, jb2, axis, right, mid)
+    if len(ends_a) < 5 or len(ends_b) < 5:
         return None
-    ib = np.array(list(zb_map))
-    zb = np.array([zb_map[i][0] for i in ib])
+    ib = np.array(list(ends_b))
+    zb = np.array([ends_b[i][0] for i in ib])
     pitch = np.median(np.abs(np.diff(zb[np.argsort(ib)])))
     shifts, gaps = [], []
-    for i, (z, gap_a) in za.items():
+    for i, (z, gap_a) in ends_a.items():
         k = int(np.argmin(np.abs(zb - z)))
         if abs(zb[k] - z) < 0.35 * pitch:
             shifts.append(int(ib[k]) - i)
-            gaps.append(gap_a + zb_map[int(ib[k])][1])
+            gaps.append(gap_a + ends_b[int(ib[k])][1])
     if len(shifts) < 5:
         return None
     values, counts = np.unique(shifts, return_counts=True)
