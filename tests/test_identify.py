@@ -15,7 +15,9 @@ from triaxtrack.identify import (
     _grid_phase,
     _membrane_row_ends,
     _Pool,
+    _roundness_over_neighbours,
     grow_chain,
+    grow_grid,
     label_frame,
     settle_offsets,
 )
@@ -109,6 +111,22 @@ def test_chain_walks_up_from_its_bottom_anchor():
     assert labels == {i: i for i in range(12)}
 
 
+def test_grid_carries_a_narrow_strip_past_a_missing_dot():
+    """A strip three columns wide (towards a silhouette: columns 4 px apart, rows 8 px) with one
+    dot of an edge column not detected: the grid grows on past it (two labelled neighbours, a
+    line and the spacing across it) to the strip's end, every dot at its own node."""
+    rows, cols = 20, 3
+    node = [(i, j) for i in range(rows) for j in range(cols) if (i, j) != (10, 0)]
+    pos = np.array([(4.0 * j + 0.02 * i**2, 8.0 * i) for i, j in node])
+    blobs = pd.DataFrame({"area_px": 6.0, "background": 1.0, "roundness": 0.5}, index=range(len(node)))
+    pool = _Pool(pos, np.ones(len(node), bool), blobs)
+    seed = {(i, j): node.index((i, j)) for i in range(3) for j in range(cols)}
+    pool.free[list(seed.values())] = False
+    labels = grow_grid(pool, seed, 0.3)
+    assert len(labels) == len(node)
+    assert all(node[k] == n for n, k in labels.items())
+
+
 def test_dots_beside_a_dark_edge_are_flagged():
     """A dot one clear pixel from a large dark region is beside an edge; dots near only other
     dots, or far from everything, are not."""
@@ -129,6 +147,16 @@ def test_membrane_row_ends():
     ids = np.array([1001 + 64 * r + c for r in (9, 10) for c in (62, 63, 0, 1, 2)] + [131, -1])
     ends = _membrane_row_ends(ids, m)
     assert ends.tolist() == [True, False, False, False, True] * 2 + [False, False]
+
+
+def test_roundness_compared_with_the_grid_neighbours():
+    """A membrane dot's roundness over the median of its labelled row and column neighbours
+    (around the specimen: column 64 is beside column 1); NaN for other IDs and lone dots."""
+    m = {"first_id": 1001, "rows": 60, "columns": 64}
+    ids = np.array([1001 + 64 * 9, 1002 + 64 * 9, 1064 + 64 * 9, 1001 + 64 * 10, 1064, 131])
+    ratio = _roundness_over_neighbours(ids, np.array([0.4, 0.8, 1.0, 0.9, 0.5, 0.7]), m)
+    assert np.allclose(ratio[:4], [0.4 / 0.9, 0.8 / 0.4, 1.0 / 0.4, 0.9 / 0.4])
+    assert np.isnan(ratio[4:]).all()
 
 
 def test_pedestal_ct_pairs_overrule_a_single_ct_but_nothing_else():
