@@ -49,6 +49,7 @@ FAR_PX = 1e9
 # 0.5 px the dots kept beside a band were as accurate as the rest on four tests (membrane p99.9
 # and maximum error unchanged); 1.0 px left 80-170 more a test unlabelled
 BAND_BLUR_PX = 0.5
+GAP_ACROSS_PX = 1.0  # a re-centred dot's window reaches this far across beyond its moment ellipse
 
 
 @dataclass(frozen=True)
@@ -64,8 +65,10 @@ class IdentifyParams:
     # smaller or more oblique dots are detected but not labelled, where their centroid is not
     # accurate. A dot beside a dark edge (the dark beyond a band's or a label's edge, towards a
     # silhouette) takes in the edge's blurred fringe: oblique 6-7 px stripe dots at 720p were
-    # 0.15-0.27 px off, so cell-wall dots there need a larger, rounder image. Clear of an edge,
-    # dots down to 4 px were within 0.1 px at the 95th percentile on four tests, membrane dots at
+    # 0.15-0.27 px off, so cell-wall dots there need a larger, rounder image; a longitudinal
+    # stripe's dots re-centred against the background in its gaps (see identify) were 0.05-0.06 px
+    # at the 95th percentile on four tests, and count as clear of the edge. Clear of an edge, dots
+    # down to 4 px were within 0.1 px at the 95th percentile on four tests, membrane dots at
     # any roundness, cell-wall dots down to 0.3; but a cell-wall dot on the sliver of a ring's
     # label at the cell's silhouette (roundness 0.32-0.38, its edge not flagged) was 0.4-1.0 px
     # off, so those stop at 0.4
@@ -915,17 +918,20 @@ def identify(
     undistort,
     dots: np.ndarray,
     params: IdentifyParams | None = None,
+    gray: np.ndarray | None = None,
 ) -> pd.DataFrame:
     """Label one frame's detections (see the module docstring).
 
     ``blobs``/``cts``: from :func:`triaxtrack.detect.detect_blobs` and
     :func:`~triaxtrack.detect.decode_coded_targets`; ``dots``: the blobs that pass the dot
     criteria (:func:`~triaxtrack.detect.dot_mask`); ``undistort``: (N, 2) distorted pixels ->
-    undistorted pixels. Returns one row per CT and per dot (columns ``LABEL_COLUMNS``), ``id``
-    -1 with a ``reason`` where the dot could not be labelled beyond doubt.
+    undistorted pixels; ``gray``: the frame, if given, re-centres the longitudinal stripes' dots
+    beside a dark edge (:func:`~triaxtrack.detect.gap_background_centroids`). Returns one row per
+    CT and per dot (columns ``LABEL_COLUMNS``), ``id`` -1 with a ``reason`` where the dot could
+    not be labelled beyond doubt.
     """
     p = params or IdentifyParams()
-    uv = blobs[["u_px", "v_px"]].to_numpy()
+    uv = blobs[["u_px", "v_px"]].to_numpy(np.float64, copy=True)
     pos = undistort(uv) if len(uv) else uv.copy()
     invertible = np.isfinite(pos).all(axis=1)
     pos = np.where(invertible[:, None], pos, FAR_PX)  # beyond the lens model: never a candidate
@@ -971,7 +977,12 @@ def identify(
     # faces keep theirs
     m = design["membrane"]
     membrane = _is_membrane(f.ids, m)
-    edge = blobs.beside_edge.to_numpy(bool)
+    edge = blobs.beside_edge.to_numpy(bool, copy=True)
+    if gray is not None:
+        # a longitudinal stripe seen edge-on lies along the dark beyond its band: its dots'
+        # centroids, re-measured against the gaps' background, are as good as those clear of it
+        k, new = _recentred_beside_edge(f, uv, edge, gray, long_names)
+        uv[k], pos[k], edge[k] = new, undistort(new), False
     cell_area = np.where(edge, p.min_cell_area_px, p.min_clear_cell_area_px)
     cell_round = np.where(edge, p.min_cell_roundness, p.min_clear_cell_roundness)
     for bad, why in (
@@ -1004,6 +1015,30 @@ def identify(
         "quality": f.quality[sel], "reason": f.reason[sel],
     })  # fmt: skip
     return pd.concat([ct_rows, dot_rows], ignore_index=True)[LABEL_COLUMNS]
+
+
+def _recentred_beside_edge(
+    f: _Frame, uv: np.ndarray, edge: np.ndarray, gray: np.ndarray, stripes: set[str]
+) -> tuple[np.ndarray, np.ndarray]:
+    """(blob indices, their new distorted centroids) of the labelled dots of ``stripes`` beside a
+    dark edge whose two neighbours along the stripe are labelled, re-centred by
+    :func:`~triaxtrack.detect.gap_background_centroids`; where that fails, left out."""
+    from triaxtrack.detect import gap_background_centroids
+
+    on = np.isin(f.group, list(stripes))
+    blob_of = {(f.group[k], int(f.ids[k])): k for k in np.nonzero(on)[0]}
+    sel, prev, nxt = [], [], []
+    for k in np.nonzero(on & edge)[0]:
+        a, b = (blob_of.get((f.group[k], int(f.ids[k]) + s)) for s in (-1, 1))
+        if a is not None and b is not None:
+            sel.append(k), prev.append(a), nxt.append(b)
+    sel = np.asarray(sel, int)
+    if not len(sel):
+        return sel, np.zeros((0, 2))
+    minor = f.blobs.minor_px.to_numpy()[sel]
+    new = gap_background_centroids(gray, uv[sel], uv[prev], uv[nxt], 0.5 * minor + GAP_ACROSS_PX)
+    ok = np.isfinite(new).all(axis=1)
+    return sel[ok], new[ok]
 
 
 def _is_membrane(ids: np.ndarray, m: dict) -> np.ndarray:
@@ -1068,7 +1103,7 @@ def label_frame(gray: np.ndarray, camera, design: dict, codes: dict[int, int], d
     blobs = detect_blobs(gray, detect_params)
     cts = decode_coded_targets(gray, blobs, codes, design["coded_target"], detect_params)
     return identify(blobs, cts, design, undistorted_pixels(camera), dot_mask(blobs, detect_params),
-                    identify_params)  # fmt: skip
+                    identify_params, gray=gray)  # fmt: skip
 
 
 def draw_labels(gray: np.ndarray, labels: pd.DataFrame, scale: int = 2) -> np.ndarray:
