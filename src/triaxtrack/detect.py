@@ -9,7 +9,9 @@ says ``undist`` (ideal pinhole pixels of the same camera matrix, see :func:`undi
   morphological closing, which removes every dark feature smaller than ``background_px``), and
   a pixel is ink when it is darker than that background by ``ink_fraction`` of it.
 * Centroids are contrast-weighted (``background - grey``) over the blob grown by one pixel, so
-  partly covered edge pixels count.
+  partly covered edge pixels count. A dot of a stripe that runs along a dark edge can be
+  re-centred against the background measured in the stripe's gaps, which holds the edge's
+  blurred fringe too (:func:`gap_background_centroids`).
 * ``contrast`` is the blob's darkest depth below the background; ``background`` the local white
   level at its centre (the surface it is printed on: label, band, membrane).
 * Shape from second moments: ``major_px``/``minor_px`` are the full axes of the ellipse with the

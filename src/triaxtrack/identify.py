@@ -1035,7 +1035,9 @@ def _recentred_beside_edge(
     for k in np.nonzero(on & edge)[0]:
         a, b = (blob_of.get((f.group[k], int(f.ids[k]) + s)) for s in (-1, 1))
         if a is not None and b is not None:
-            sel.append(k), prev.append(a), nxt.append(b)
+            sel.append(k)
+            prev.append(a)
+            nxt.append(b)
     sel = np.asarray(sel, int)
     if not len(sel):
         return sel, np.zeros((0, 2))
