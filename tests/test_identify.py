@@ -17,6 +17,7 @@ from triaxtrack.identify import (
     _membrane_row_ends,
     _Pool,
     _roundness_over_neighbours,
+    _seed_grid,
     grow_chain,
     grow_grid,
     label_frame,
@@ -126,6 +127,19 @@ def test_grid_carries_a_narrow_strip_past_a_missing_dot():
     labels = grow_grid(pool, seed, 0.3)
     assert len(labels) == len(node)
     assert all(node[k] == n for n, k in labels.items())
+
+
+def test_a_strip_two_columns_wide_is_seeded_only_when_asked():
+    """Beyond a band, a strip of two columns (the band hides the column on the start's left): no
+    3 x 3 block fits, the 3 x 2 block on the other side does when ``narrow``."""
+    node = [(i, j) for i in range(6) for j in (0, 1)]
+    pos = np.array([(5.0 * j, 8.0 * i) for i, j in node])
+    blobs = pd.DataFrame({"area_px": 6.0, "background": 1.0, "roundness": 0.5}, index=range(len(node)))
+    pool = _Pool(pos, np.ones(len(node), bool), blobs)
+    start, down = node.index((2, 0)), np.array([0.0, 1.0])
+    assert _seed_grid(pool, start, down, 0.3) is None
+    seed = _seed_grid(pool, start, down, 0.3, narrow=True)
+    assert seed == {(i, j): node.index((2 + i, j)) for i in (-1, 0, 1) for j in (0, 1)}
 
 
 def test_dots_beside_a_dark_edge_are_flagged():

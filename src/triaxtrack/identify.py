@@ -496,9 +496,12 @@ def _near_polyline(
     return out
 
 
-def _seed_grid(pool: _Pool, start: int, down: np.ndarray, gate: float) -> dict[tuple[int, int], int] | None:
-    """A 3 x 3 grid seed around a dot: its neighbours below and in +theta fix the two grid steps,
-    and every node of the block must be the single dot within the gate of its prediction."""
+def _seed_grid(
+    pool: _Pool, start: int, down: np.ndarray, gate: float, narrow: bool = False
+) -> dict[tuple[int, int], int] | None:
+    """A 3 x 3 grid seed around a dot (or, ``narrow``, 3 x 2 to one side of it): its neighbours
+    below and in +theta fix the two grid steps, and every node of the block must be the single
+    dot within the gate of its prediction."""
     right = np.array([down[1], -down[0]])  # seen from outside, +theta is `down` turned this way
     d, idx = pool.tree.query(pool.pos[start], k=9)
     steps = []
@@ -514,14 +517,18 @@ def _seed_grid(pool: _Pool, start: int, down: np.ndarray, gate: float) -> dict[t
             return None
         steps.append(pool.pos[best] - pool.pos[start])
     radius = gate * min(np.linalg.norm(steps[0]), np.linalg.norm(steps[1]))
-    seed = {}
-    for i in (-1, 0, 1):
-        for j in (-1, 0, 1):
-            k = pool.unique_within(pool.pos[start] + i * steps[0] + j * steps[1], radius)
-            if k < 0:
-                return None
-            seed[(i, j)] = k
-    return seed
+    node = {
+        (i, j): pool.unique_within(pool.pos[start] + i * steps[0] + j * steps[1], radius)
+        for i in (-1, 0, 1)
+        for j in (-1, 0, 1)
+    }
+    # the 3 x 3 block, or (``narrow``) where a column beside the start is missing (a strip two
+    # columns wide, beyond a band and towards a silhouette) the 3 x 2 block on the other side
+    for cols in ((-1, 0, 1), (0, 1), (-1, 0)) if narrow else ((-1, 0, 1),):
+        seed = {(i, j): node[(i, j)] for i in (-1, 0, 1) for j in cols}
+        if min(seed.values()) >= 0:
+            return seed
+    return None
 
 
 def _grid_phase(grid: dict, area: np.ndarray, p: IdentifyParams) -> tuple[int, int] | None:
@@ -614,11 +621,11 @@ class _MembraneView:
         )
 
 
-def _grow_region(pool: _Pool, start: int, down: np.ndarray, gate: float) -> list[dict]:
+def _grow_region(pool: _Pool, start: int, down: np.ndarray, gate: float, narrow: bool = False) -> list[dict]:
     """The grid region grown from a free dot (taking its dots from the pool), or none."""
     if not pool.free[start]:
         return []
-    seed = _seed_grid(pool, start, down, gate)
+    seed = _seed_grid(pool, start, down, gate, narrow)
     if seed is None:
         return []
     pool.free[list(seed.values())] = False
@@ -647,13 +654,15 @@ def _label_membrane(f: _Frame, pool: _Pool, centres: dict, design: dict, p: Iden
         _, start = pool.tree.query(start_at)
         regions += _grow_region(pool, int(start), down, p.gate)
     # then the dots no pedestal CT led to (beyond a longitudinal stripe's band): their regions
-    # are fixed across the band below
+    # are fixed across the band below. Strips two columns wide are seeded last, from what the
+    # wider regions left
     tops = [a.top[0] @ axis for a in anchors if a.top is not None]
     bottoms = [a.bottom[0] @ axis for a in anchors if a.bottom is not None]
     if tops and bottoms:
         s = f.pos @ axis
-        for k in np.nonzero(pool.free & (s > np.mean(tops)) & (s < np.mean(bottoms)))[0]:
-            regions += _grow_region(pool, int(k), axis, p.gate)
+        for narrow in (False, True):
+            for k in np.nonzero(pool.free & (s > np.mean(tops)) & (s < np.mean(bottoms)))[0]:
+                regions += _grow_region(pool, int(k), axis, p.gate, narrow)
     ctx = _MembraneView.of(regions, anchors, axis, f.pos, design)
     phases = [_grid_phase(g, area, p) if len(g) >= p.min_region_dots else None for g in regions]
     fixed: dict[int, tuple[int, int]] = {}
