@@ -232,6 +232,28 @@ def test_region_beyond_a_band_is_fixed_along_curved_rows(kit):
     assert got == (20, 3)
 
 
+def test_columns_hidden_by_a_band_counted_from_the_spacing_row_by_row(kit):
+    """Beyond a band, towards a silhouette, columns lie 5 px apart (10 px on the fixed side) and
+    slant; the column facing the band is seen on its upper rows only. The medians of the two
+    facing columns, over different rows, lie 17 px apart; row by row they are 5 px apart, which
+    counts the four columns from one facing column to the other."""
+    design = kit[0]
+    m = design["membrane"]
+    pos, fixed, beyond = [], {}, {}
+    for r in range(5, 26):
+        for c in range(10, 20):
+            fixed[(r, c)] = len(pos)
+            pos.append((10.0 * c, 8.0 * r))
+        for c in range(23, 27):
+            if c == 23 and r > 15:
+                continue  # the facing column's lower rows are hidden
+            beyond[(r - 3, c - 20)] = len(pos)
+            pos.append((221.0 + 5.0 * (c - 23) + 0.3 * (8.0 * r - 120.0), 8.0 * r))
+    phase = ((m["large_first"] - 3) % m["large_step"], (m["large_first"] - 20) % m["large_step"])
+    got = _bridge(beyond, phase, fixed, (0, 0), np.asarray(pos), np.array([0.0, 1.0]), design)
+    assert got == (20, 3)
+
+
 def test_larger_dots_found_where_dot_size_falls_across_the_region():
     """Three columns towards a silhouette, each dot 0.6 times the area of the one before it, the
     larger dots 1.6 times a small dot's area: the phase is still the larger dots' one."""

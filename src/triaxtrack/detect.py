@@ -225,9 +225,9 @@ def gap_background_centroids(
     A dot beside a dark edge that runs along its stripe (a longitudinal band seen edge-on, the
     dark beyond it) has the edge's blurred fringe in its window, and the contrast-weighted
     centroid of :func:`detect_blobs` leans towards the edge (0.1-0.3 px). Here the background of
-    a window pixel at offset ``c`` across the stripe is the mean grey at the same offset across in
-    the two gaps, half-way to the neighbouring dots ``prev_uv``/``next_uv`` (distorted pixels):
-    the edge's fringe is in it too and cancels. The window reaches half-way to the neighbours
+    a window pixel is the mean grey at its place across the stripe in the two gaps, half-way to
+    the neighbouring dots ``prev_uv``/``next_uv`` (distorted pixels): the edge's fringe is in it
+    too and cancels. The window reaches half-way to the neighbours
     along the stripe and ``half_across`` pixels across it. NaN where the window leaves the image
     or holds no ink.
     """
@@ -243,6 +243,7 @@ def gap_background_centroids(
         t = np.asarray(b, float) - np.asarray(a, float)
         s = np.linalg.norm(t) / 2
         if not np.isfinite(s) or s <= 0:
+            out[k] = np.nan
             continue
         t /= 2 * s
         n = np.array([-t[1], t[0]])
@@ -256,10 +257,10 @@ def gap_background_centroids(
                 break
             vv, uu = np.mgrid[v0 - r : v0 + r + 1, u0 - r : u0 + r + 1]
             x = np.c_[uu.ravel(), vv.ravel()].astype(np.float64)
-            across = (x - c) @ n
-            win = (np.abs((x - c) @ t) <= 0.5 * s) & (np.abs(across) <= half)
-            x, across = x[win], across[win]
-            bg = np.mean([sample(g + across[:, None] * n) for g in gaps], axis=0)
+            win = (np.abs((x - c) @ t) <= 0.5 * s) & (np.abs((x - c) @ n) <= half)
+            x = x[win]
+            # each pixel's background: the grey at its own place across, in either gap
+            bg = np.mean([sample(x + ((g - x) @ t)[:, None] * t) for g in gaps], axis=0)
             wt = np.clip(bg - img[x[:, 1].astype(int), x[:, 0].astype(int)], 0, None)
             wt *= bg > GAP_BRIGHT * bg.max()
             if wt.sum() <= 0:

@@ -219,11 +219,11 @@ def grow_grid(pool: _Pool, seed: dict[tuple[int, int], int], gate: float) -> dic
 
     A node is predicted by every straight continuation (two labelled nodes in a line) and every
     parallelogram (three labelled corners); the predictions must agree within the gate, and
-    exactly one free dot may lie within ``gate`` times the local spacing of their median. A node
-    needs ``MIN_SUPPORT`` labelled nodes among its eight neighbours, or one fewer when one of
-    them continues a straight line and the other, beside it, gives the spacing across that line
-    (which then bounds the gate): that carries a strip a few columns wide past a dot missing from
-    its edge column (towards a silhouette, beyond a band).
+    exactly one free dot may lie within ``gate`` times the local spacing of their median (the
+    spacing along the lines and, where measured, across them). A node needs ``MIN_SUPPORT``
+    labelled nodes among its eight neighbours, or one fewer when one of them continues a straight
+    line and the other, beside it, gives the spacing across that line: that carries a strip a few
+    columns wide past a dot missing from its edge column (towards a silhouette, beyond a band).
     """
     labels = dict(seed)
     pos = pool.pos
@@ -234,7 +234,7 @@ def grow_grid(pool: _Pool, seed: dict[tuple[int, int], int], gate: float) -> dic
         for i, j in frontier:
             support = sum((i + di, j + dj) in labels for di in (-1, 0, 1) for dj in (-1, 0, 1))
             if support < MIN_SUPPORT - 1:
-                continue  # never grow a spur: a node needs labelled neighbours on two sides
+                continue  # never grow a spur: a node needs two labelled neighbours at least
             preds, steps = [], []
             across = False  # a straight continuation whose spacing across was measured
             for di, dj in NEIGHBOURS:
@@ -499,7 +499,7 @@ def _near_polyline(
 def _seed_grid(
     pool: _Pool, start: int, down: np.ndarray, gate: float, narrow: bool = False
 ) -> dict[tuple[int, int], int] | None:
-    """A 3 x 3 grid seed around a dot (or, ``narrow``, 3 x 2 to one side of it): its neighbours
+    """A 3 x 3 grid seed around a dot (or, ``narrow``, 3 x 2 to its right): its neighbours
     below and in +theta fix the two grid steps, and every node of the block must be the single
     dot within the gate of its prediction."""
     right = np.array([down[1], -down[0]])  # seen from outside, +theta is `down` turned this way
@@ -522,9 +522,10 @@ def _seed_grid(
         for i in (-1, 0, 1)
         for j in (-1, 0, 1)
     }
-    # the 3 x 3 block, or (``narrow``) where a column beside the start is missing (a strip two
-    # columns wide, beyond a band and towards a silhouette) the 3 x 2 block on the other side
-    for cols in ((-1, 0, 1), (0, 1), (-1, 0)) if narrow else ((-1, 0, 1),):
+    # the 3 x 3 block, or (``narrow``) where the column on the start's left is missing (a strip
+    # two columns wide, beyond a band and towards a silhouette) the 3 x 2 block on its right: every
+    # free dot is tried as a start, so a strip's left column is among them
+    for cols in ((-1, 0, 1), (0, 1)) if narrow else ((-1, 0, 1),):
         seed = {(i, j): node[(i, j)] for i in (-1, 0, 1) for j in cols}
         if min(seed.values()) >= 0:
             return seed
@@ -994,7 +995,10 @@ def identify(
         # a longitudinal stripe seen edge-on lies along the dark beyond its band: its dots'
         # centroids, re-measured against the gaps' background, are as good as those clear of it
         k, new = _recentred_beside_edge(f, uv, edge, gray, long_names)
-        uv[k], pos[k], edge[k], recentred[k] = new, undistort(new), False, True
+        new_pos = undistort(new) if len(k) else new
+        ok = np.isfinite(new_pos).all(axis=1)
+        k, new, new_pos = k[ok], new[ok], new_pos[ok]
+        uv[k], pos[k], edge[k], recentred[k] = new, new_pos, False, True
     cell_area = np.where(edge, p.min_cell_area_px, p.min_clear_cell_area_px)
     cell_round = np.where(edge, p.min_cell_roundness, p.min_clear_cell_roundness)
     cell_round = np.where(recentred, p.min_recentred_roundness, cell_round)
@@ -1066,8 +1070,9 @@ def _roundness_over_neighbours(ids: np.ndarray, roundness: np.ndarray, m: dict) 
     """Each membrane dot's roundness over the median of its labelled grid neighbours' (row and
     column, around the specimen); NaN where it has none or is not a membrane dot."""
     ids = np.asarray(ids, np.int64)
+    roundness = np.asarray(roundness, np.float64)
     member = _is_membrane(ids, m)
-    where = {int(t): r for t, r in zip(ids[member], np.asarray(roundness)[member], strict=True)}
+    where = {int(t): r for t, r in zip(ids[member], roundness[member], strict=True)}
     k = ids - m["first_id"]
     row, col = k // m["columns"], k % m["columns"]
     out = np.full(len(ids), np.nan)
