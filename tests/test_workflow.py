@@ -209,9 +209,8 @@ def test_snakefmt_is_clean():
 def test_small_simulation_end_to_end_then_inventory(tmp_path):
     """Simulate a small test in a copy of the workflow and measure it: 13 cameras x 6 frames at
     1280 x 720 (two chunks of 3 frames, 1 % axial strain: dots move up to 0.2 mm a frame), 8 board
-    images each, tracked,
-    triangulated, meshed and reported; then take its folder as a recorded test and build its
-    inventory. About 2 minutes on 2 cores."""
+    images each, tracked, triangulated, meshed and reported; then take its folder as a recorded
+    test and build its inventory. About 2 minutes on 2 cores."""
     from triaxtrack.score import score
 
     work = tmp_path / "work"

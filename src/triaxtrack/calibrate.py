@@ -823,8 +823,7 @@ def refine_boards(
             out.append(view)
             continue
         gray = _read_gray(camera, by_name[view.image])
-        obj = board_corners_mm(board) if view.object_mm is None else view.object_mm
-        uv, obj = refine_view(gray, view.corners_px, obj, square, K, dist)
+        uv, obj = refine_view(gray, view.corners_px, _object_points(view, board), square, K, dist)
         out.append(_enough(BoardImage(view.image, uv, obj, view.whole), square))
     return out
 

@@ -227,9 +227,8 @@ def gap_background_centroids(
     centroid of :func:`detect_blobs` leans towards the edge (0.1-0.3 px). Here the background of
     a window pixel is the mean grey at its place across the stripe in the two gaps, half-way to
     the neighbouring dots ``prev_uv``/``next_uv`` (distorted pixels): the edge's fringe is in it
-    too and cancels. The window reaches half-way to the neighbours
-    along the stripe and ``half_across`` pixels across it. NaN where the window leaves the image
-    or holds no ink.
+    too and cancels. The window reaches half-way to the neighbours along the stripe and
+    ``half_across`` pixels across it. NaN where the window leaves the image or holds no ink.
     """
     img = np.asarray(gray, np.float32)
     h, w = img.shape

@@ -47,7 +47,7 @@ FAR_PX = 1e9
 # a membrane dot whose image comes within this of a longitudinal band's (beyond its moment
 # ellipse, where its blurred edge still darkens pixels) may be partly hidden: not labelled. At
 # 0.5 px the dots kept beside a band were as accurate as the rest on four tests (membrane p99.9
-# and maximum error unchanged); 1.0 px left 80-170 more a test unlabelled
+# and maximum error unchanged); 1.0 px left 80-175 more a test unlabelled
 BAND_BLUR_PX = 0.5
 GAP_ACROSS_PX = 1.0  # a re-centred dot's window reaches this far across beyond its moment ellipse
 
@@ -1066,24 +1066,31 @@ def _is_membrane(ids: np.ndarray, m: dict) -> np.ndarray:
     return (k >= 0) & (k < m["rows"] * m["columns"])
 
 
+def _grid_neighbour(ids: np.ndarray, m: dict, dr: int, dc: int) -> np.ndarray:
+    """The membrane ID ``dr`` rows and ``dc`` columns (around the specimen) from each of ``ids``
+    (membrane IDs); 0 beyond the end rows."""
+    k = np.asarray(ids, np.int64) - m["first_id"]
+    row, col = k // m["columns"] + dr, (k % m["columns"] + dc) % m["columns"]
+    return np.where((row >= 0) & (row < m["rows"]), row * m["columns"] + col + m["first_id"], 0)
+
+
 def _roundness_over_neighbours(ids: np.ndarray, roundness: np.ndarray, m: dict) -> np.ndarray:
     """Each membrane dot's roundness over the median of its labelled grid neighbours' (row and
     column, around the specimen); NaN where it has none or is not a membrane dot."""
     ids = np.asarray(ids, np.int64)
     roundness = np.asarray(roundness, np.float64)
     member = _is_membrane(ids, m)
-    where = {int(t): r for t, r in zip(ids[member], roundness[member], strict=True)}
-    k = ids - m["first_id"]
-    row, col = k // m["columns"], k % m["columns"]
+    of = pd.Series(roundness[member], index=ids[member])
+    of = of[~of.index.duplicated()]
     out = np.full(len(ids), np.nan)
-    for n in np.nonzero(member)[0]:
-        nb = [
-            where.get(int((row[n] + dr) * m["columns"] + (col[n] + dc) % m["columns"] + m["first_id"]))
-            for dr, dc in NEIGHBOURS
-        ]
-        nb = [x for x in nb if x is not None]
-        if nb:
-            out[n] = roundness[n] / np.median(nb)
+    if member.any():
+        nb = np.stack(
+            [of.reindex(_grid_neighbour(ids[member], m, dr, dc)).to_numpy() for dr, dc in NEIGHBOURS]
+        )
+        has = np.isfinite(nb).any(axis=0)
+        ratio = np.full(member.sum(), np.nan)
+        ratio[has] = roundness[member][has] / np.nanmedian(nb[:, has], axis=0)
+        out[member] = ratio
     return out
 
 
@@ -1092,26 +1099,19 @@ def _membrane_row_ends(ids: np.ndarray, m: dict) -> np.ndarray:
     c + 1, around the specimen) is not among ``ids``."""
     ids = np.asarray(ids, np.int64)
     member = _is_membrane(ids, m)
-    k = ids - m["first_id"]
-    row, col = k // m["columns"], k % m["columns"]
     out = np.zeros(len(ids), bool)
     for s in (-1, 1):
-        nb = row * m["columns"] + (col + s) % m["columns"] + m["first_id"]
-        out |= member & ~np.isin(nb, ids[member])
+        out |= member & ~np.isin(_grid_neighbour(ids, m, 0, s), ids[member])
     return out
 
 
 def undistorted_pixels(camera) -> callable:
     """(N, 2) distorted pixels -> undistorted pixels of ``camera`` (NaN where not invertible)."""
-    from triaxtrack.optics import pixels_to_normalized
+    from functools import partial
 
-    K = np.asarray(camera.K, np.float64)
+    from triaxtrack.optics import pixels_to_undistorted
 
-    def undistort(uv: np.ndarray) -> np.ndarray:
-        xy = pixels_to_normalized(camera, uv)
-        return xy @ K[:2, :2].T + K[:2, 2]
-
-    return undistort
+    return partial(pixels_to_undistorted, camera)
 
 
 def label_frame(gray: np.ndarray, camera, design: dict, codes: dict[int, int], detect_params=None,

@@ -169,6 +169,13 @@ def pixels_to_normalized(camera: Camera, uv_px: np.ndarray) -> np.ndarray:
     return xy
 
 
+def pixels_to_undistorted(camera: Camera, uv_px: np.ndarray) -> np.ndarray:
+    """(N, 2) undistorted pixels ``K @ undistort(uv)`` of (N, 2) distorted pixels, in the camera's
+    own K: ``cv2.undistortPoints(uv, K, dist, P=K)`` (NaN where :func:`pixels_to_normalized` is)."""
+    K = np.asarray(camera.K, np.float64)
+    return pixels_to_normalized(camera, uv_px) @ K[:2, :2].T + K[:2, 2]
+
+
 def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Row-wise dot product of two (N, 3) arrays (einsum: several times faster than sum(axis=1))."""
     return np.einsum("ij,ij->i", a, b)

@@ -17,7 +17,7 @@ import numpy as np
 import pandas as pd
 
 from triaxtrack.calibrate import calibrated_camera, read_calibration
-from triaxtrack.optics import Camera, pixels_to_normalized, read_cameras
+from triaxtrack.optics import Camera, pixels_to_normalized, pixels_to_undistorted, read_cameras
 
 COLUMNS = ["metric", "item", "value", "tolerance", "unit", "passed", "source"]
 AT_LEAST = {"membrane_3_rays"}  # per-frame metrics whose tolerance is a minimum
@@ -87,13 +87,6 @@ def pixel_grid(width: int, height: int, step_px: int = UNDISTORTION_GRID_PX) -> 
     return np.c_[uu.ravel(), vv.ravel()].astype(np.float64)
 
 
-def _undistorted_px(camera: Camera, uv_px: np.ndarray) -> np.ndarray:
-    """(N, 2) undistorted pixel positions ``K @ undistort(uv)`` of distorted pixels ``uv_px``
-    in the camera's own K (NaN where :func:`~triaxtrack.optics.pixels_to_normalized` fails)."""
-    xy = pixels_to_normalized(camera, uv_px)
-    return xy @ camera.K[:2, :2].T + camera.K[:2, 2]
-
-
 def undistortion_map_error(est: Camera, truth: Camera, step_px: int = UNDISTORTION_GRID_PX) -> float:
     """Largest difference, in pixels, between two cameras' undistortion maps over the whole image.
 
@@ -111,7 +104,7 @@ def undistortion_map_error(est: Camera, truth: Camera, step_px: int = UNDISTORTI
     cannot be inverted (:func:`triaxtrack.optics.pixels_to_normalized`).
     """
     uv = pixel_grid(truth.width, truth.height, step_px)
-    err = np.linalg.norm(_undistorted_px(est, uv) - _undistorted_px(truth, uv), axis=1)
+    err = np.linalg.norm(pixels_to_undistorted(est, uv) - pixels_to_undistorted(truth, uv), axis=1)
     return float(err.max()) if np.isfinite(err).all() else float("inf")
 
 
