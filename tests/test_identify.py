@@ -8,16 +8,25 @@ import pandas as pd
 import pytest
 
 from triaxtrack.codes import bits_of
-from triaxtrack.detect import DetectParams, decode_coded_targets, detect_blobs, gap_background_centroids
+from triaxtrack.detect import (
+    DetectParams,
+    decode_coded_targets,
+    detect_blobs,
+    gap_background_centroids,
+    merged_pair_centroids,
+)
 from triaxtrack.identify import (
+    MERGED_QUALITY,
     IdentifyParams,
     _Anchor,
     _bridge,
+    _Frame,
     _grid_phase,
     _membrane_row_ends,
+    _over_neighbours,
     _Pool,
-    _roundness_over_neighbours,
     _seed_grid,
+    _split_merged_pairs,
     grow_chain,
     grow_grid,
     label_frame,
@@ -182,8 +191,21 @@ def test_membrane_row_ends():
     """The first and last dot of each labelled run along a row (around the specimen) are ends."""
     m = {"first_id": 1001, "rows": 60, "columns": 64}
     ids = np.array([1001 + 64 * r + c for r in (9, 10) for c in (62, 63, 0, 1, 2)] + [131, -1])
-    ends = _membrane_row_ends(ids, m)
+    ends, gaps = _membrane_row_ends(ids, m)
     assert ends.tolist() == [True, False, False, False, True] * 2 + [False, False]
+    assert not gaps.any()
+
+
+def test_membrane_row_gaps_in_an_end_row():
+    """In an end row, a run's end whose missing neighbour has a labelled neighbour towards the
+    middle rows is beside a gap (a lost dot); one at the silhouette, or in another row, is not."""
+    m = {"first_id": 1001, "rows": 60, "columns": 64}
+    bottom = [1001 + 64 * 59 + c for c in (10, 11, 13, 14)]  # column 12 lost, row 59 whole
+    above = [1001 + 64 * 58 + c for c in range(10, 15)]
+    top = [1001 + c for c in (20, 21, 23)] + [1001 + 64 + c for c in (20, 21)]  # column 22 hidden
+    ends, gaps = _membrane_row_ends(np.array(bottom + above + top), m)
+    assert ends.tolist() == [True] * 4 + [True, False, False, False, True] + [True] * 5
+    assert gaps.tolist() == [False, True, True, False] + [False] * 5 + [False] * 5
 
 
 def test_roundness_compared_with_the_grid_neighbours():
@@ -191,7 +213,7 @@ def test_roundness_compared_with_the_grid_neighbours():
     (around the specimen: column 64 is beside column 1); NaN for other IDs and lone dots."""
     m = {"first_id": 1001, "rows": 60, "columns": 64}
     ids = np.array([1001 + 64 * 9, 1002 + 64 * 9, 1064 + 64 * 9, 1001 + 64 * 10, 1064, 131])
-    ratio = _roundness_over_neighbours(ids, np.array([0.4, 0.8, 1.0, 0.9, 0.5, 0.7]), m)
+    ratio = _over_neighbours(ids, np.array([0.4, 0.8, 1.0, 0.9, 0.5, 0.7]), m)
     assert np.allclose(ratio[:4], [0.4 / 0.9, 0.8 / 0.4, 1.0 / 0.4, 0.9 / 0.4])
     assert np.isnan(ratio[4:]).all()
 
@@ -312,3 +334,63 @@ def test_every_stripe_and_the_membrane_are_labelled(small_labels):
         assert not g.id.duplicated().any(), cam
     unl = labels[labels.id < 0]
     assert (unl.reason != "").all()  # every unlabelled detection says why
+
+
+def _column_of_dots(v_centres: list[float], half_axes: list[tuple], u: float = 20.3) -> np.ndarray:
+    """A grey picture (40 x 60 px) of a column of blurred elliptic dots on a white membrane."""
+    ss = 8  # supersampling
+    h, w = 60, 40
+    yy, xx = (np.mgrid[0 : h * ss, 0 : w * ss] + 0.5) / ss - 0.5  # pixel centres at integers
+    img = np.full(xx.shape, 200.0)
+    for v, (a, b) in zip(v_centres, half_axes, strict=True):
+        img[((xx - u) / a) ** 2 + ((yy - v) / b) ** 2 <= 1] = 30.0
+    return cv2.GaussianBlur(img.reshape(h, ss, w, ss).mean(axis=(1, 3)), (0, 0), 0.7).astype(np.uint8)
+
+
+# a membrane column at 10 % strain, 720p: dots 4.2 px apart, 3.2 x 2.6 px, the larger 3.2 x 3.6
+# px, whose images merge; U, A, B, D as in merged pairs, and a lone dot further down
+COLUMN_V = [12.0, 16.2, 20.4, 24.6, 45.0]
+COLUMN_AXES = [(1.6, 1.3), (1.6, 1.8), (1.6, 1.8), (1.6, 1.3), (1.6, 1.3)]
+
+
+def test_two_merged_dots_are_fitted_apart():
+    """Two larger dots merged into one blob between two single ones: fitted apart, each is within
+    0.1 px; where a single dot lies between the two expected places, there is no merged pair."""
+    img = _column_of_dots(COLUMN_V, COLUMN_AXES)
+    truth = np.array([[20.3, v] for v in COLUMN_V[1:3]])
+    blobs = detect_blobs(img, DetectParams(background_px=16)).sort_values("v_px")
+    assert len(blobs) == 4
+    merged, lone = blobs.iloc[1], blobs.iloc[3]
+    assert merged.area_px > 2 * lone.area_px
+    u_d = np.array([[20.3, COLUMN_V[0]], [20.3, COLUMN_V[3]]])  # their tails reach the window
+    expected = truth + [[0.3, 0.2], [-0.2, -0.3]]
+    centres, (ha, hb, rms, roundness) = merged_pair_centroids(img, *expected, merged.background, u_d)
+    assert np.abs(centres - truth).max() < 0.1
+    assert 0.5 < ha / hb < 2 and rms < 0.25 and 0.6 < roundness <= 1
+    centres, fit = merged_pair_centroids(img, (20.3, 43.2), (20.3, 46.8), lone.background, u_d)
+    assert np.isnan(centres).all() and np.isnan(fit).all()
+
+
+def test_a_merged_pair_between_labelled_column_neighbours_is_labelled():
+    """U, A, B, D down a membrane column with U and D labelled and A, B merged in one blob: A
+    and B get their IDs (U + 64, U + 128) at their fitted centres, with the merged pairs' lower
+    quality, and the merged blob stays unlabelled with a reason. Without D, nothing is fitted."""
+    m = {"first_id": 1001, "rows": 60, "columns": 64}
+    img = _column_of_dots(COLUMN_V[:4], COLUMN_AXES[:4])
+    truth = np.array([[20.3, v] for v in COLUMN_V[1:3]])
+    blobs = detect_blobs(img, DetectParams(background_px=16)).sort_values("v_px", ignore_index=True)
+    assert len(blobs) == 3
+    uv = blobs[["u_px", "v_px"]].to_numpy()
+    u = 1001 + 64 * 20 + 7
+
+    def split(ids):
+        f = _Frame(blobs=blobs, pos=uv, ids=np.array(ids), group=np.array(["r0", "", "r0"], object),
+                   quality=np.zeros(3), reason=np.full(3, "not reached", object))  # fmt: skip
+        return f, _split_merged_pairs(f, uv, img, np.ones(3, bool), m, IdentifyParams(), None)
+
+    f, rows = split([u, -1, u + 192])
+    assert rows.id.tolist() == [u + 64, u + 128] and (rows.quality == MERGED_QUALITY).all()
+    assert np.abs(rows[["u_px", "v_px"]].to_numpy() - truth).max() < 0.1
+    assert f.ids[1] == -1 and str(u + 64) in f.reason[1]
+    f, rows = split([u, -1, -1])
+    assert rows.empty and f.reason[1] == "not reached"

@@ -271,6 +271,78 @@ def gap_background_centroids(
     return out
 
 
+PAIR_PAD_PX = 3  # the window of merged_pair_centroids reaches this far beyond the two dots
+
+
+def merged_pair_centroids(
+    gray: np.ndarray,
+    a_uv: np.ndarray,
+    b_uv: np.ndarray,
+    white: float,
+    fixed_uv: np.ndarray,
+    params: DetectParams | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Centroids of two dots whose images merged into one blob, by a fit of two Gaussians.
+
+    ``a_uv``/``b_uv``: where the two dots are expected (distorted pixels); ``white``: the local
+    white level (the blob's ``background``); ``fixed_uv``: (K, 2) neighbouring dots whose blurred
+    tails reach the blob, fitted at their own centroids. The blob is the ink (the rule of
+    :func:`detect_blobs`) at the midpoint; it must hold the pixels of both expected places and
+    stay within the window (not a dark edge). Its pixels, grown by one, are fitted with one
+    Gaussian per dot (free centre and height, one shared covariance) plus one per fixed neighbour
+    (free height): the dots are alike, and where they merge each is seen only in part.
+
+    Returns ((2, 2) centroids of the two dots, (4,) [height a, height b, residual RMS over the
+    largest contrast, roundness of the fitted Gaussian]); NaN where there is no such blob.
+    """
+    from scipy.optimize import least_squares
+
+    p = params or DetectParams()
+    nan = (np.full((2, 2), np.nan), np.full(4, np.nan))
+    g = np.asarray(gray)
+    a, b = np.asarray(a_uv, np.float64), np.asarray(b_uv, np.float64)
+    mid = 0.5 * (a + b)
+    r = int(np.ceil(np.linalg.norm(b - a))) + PAIR_PAD_PX
+    u0, v0 = int(round(mid[0])) - r, int(round(mid[1])) - r
+    if not np.isfinite(mid).all() or u0 < 0 or v0 < 0 or u0 + 2 * r >= g.shape[1] or v0 + 2 * r >= g.shape[0]:
+        return nan
+    contrast = np.float32(white) - g[v0 : v0 + 2 * r + 1, u0 : u0 + 2 * r + 1].astype(np.float32)
+    ink = (contrast > max(p.min_contrast, p.ink_fraction * white)).astype(np.uint8)
+    _, comp = cv2.connectedComponents(ink, connectivity=8)
+    at = [comp[int(round(q[1])) - v0, int(round(q[0])) - u0] for q in (a, mid, b)]
+    if at[0] == 0 or len(set(at)) != 1:
+        return nan
+    blob = (comp == at[0]).astype(np.uint8)
+    if blob[0].any() or blob[-1].any() or blob[:, 0].any() or blob[:, -1].any():
+        return nan
+    ys, xs = np.nonzero(cv2.dilate(blob, np.ones((3, 3), np.uint8)))
+    x = np.c_[xs + u0, ys + v0].astype(np.float64)
+    y = np.clip(contrast[ys, xs], 0, None).astype(np.float64)
+    fixed = np.asarray(fixed_uv, np.float64).reshape(-1, 2)
+    k = len(fixed)
+
+    def gauss(c, inv):
+        d = x[:, None, :] - c[None, :, :]
+        return np.exp(-0.5 * np.einsum("nki,ij,nkj->nk", d, inv, d))
+
+    def model(q):
+        chol = np.array([[np.exp(q[4]), 0.0], [q[5], np.exp(q[6])]])
+        inv = np.linalg.inv(chol @ chol.T)
+        centres = np.r_[q[:4].reshape(2, 2), fixed]
+        return gauss(centres, inv) @ q[7:]
+
+    sigma = 0.5 * np.sqrt(blob.sum() / (2 * np.pi)) + 0.5
+    q0 = np.r_[a, b, np.log(sigma), 0.0, np.log(sigma), np.full(2 + k, y.max())]
+    if len(y) <= len(q0):
+        return nan
+    fit = least_squares(lambda q: model(q) - y, q0)
+    q = fit.x
+    chol = np.array([[np.exp(q[4]), 0.0], [q[5], np.exp(q[6])]])
+    ev = np.linalg.eigvalsh(chol @ chol.T)
+    rms = np.sqrt(np.mean(fit.fun**2)) / y.max()
+    return q[:4].reshape(2, 2), np.array([q[7], q[8], rms, np.sqrt(ev[0] / ev[1])])
+
+
 def dot_mask(blobs: pd.DataFrame, params: DetectParams | None = None) -> np.ndarray:
     """Which blobs pass the paper's area and roundness criteria for solid dots."""
     p = params or DetectParams()

@@ -110,7 +110,8 @@ membrane region; ``u_px, v_px`` the distorted centroid and ``u_undist_px, v_undi
 point undistorted (ideal pinhole pixels of the calibrated K), pixel centres at integers;
 ``area_px`` the binarised blob's area; ``roundness`` its minor over major axis; ``quality`` 0-1
 (CTs: the weakest code sector's contrast; dots: 1 for the Eq. 1 dots and stripe ends found from
-a CT, 0.9 for dots found by interpolation or the grid walk)."""
+a CT, 0.9 for dots found by interpolation or the grid walk, 0.5 for two membrane dots merged in
+one blob and fitted apart, each with its own row: half the blob's area, the fit's roundness)."""
 
 
 def concat_tables(paths: list[str | Path], schema: Schema) -> pd.DataFrame:
