@@ -103,6 +103,12 @@ def background(gray: np.ndarray, size_px: int) -> np.ndarray:
     return np.maximum(bg, g.astype(np.float32))
 
 
+def _ink(contrast: np.ndarray, white, p: DetectParams) -> np.ndarray:
+    """uint8 mask of the pixels darker than the white level ``white`` (a map or a number) by
+    ``ink_fraction`` of it and by ``min_contrast`` (``contrast``: white level - grey)."""
+    return (contrast > np.maximum(p.min_contrast, p.ink_fraction * white)).astype(np.uint8)
+
+
 def _label_sums(labels: np.ndarray, n: int, weights: np.ndarray | None = None) -> dict[str, np.ndarray]:
     """Per-label zeroth, first and second moments over the pixels of each label (label 0 skipped)."""
     ys, xs = np.nonzero(labels)
@@ -132,7 +138,7 @@ def detect_blobs(gray: np.ndarray, params: DetectParams | None = None) -> pd.Dat
     size = p.background_px or max(8, g.shape[1] // 80)
     bg = background(g, size)
     contrast = bg - g.astype(np.float32)
-    ink = (contrast > np.maximum(p.min_contrast, p.ink_fraction * bg)).astype(np.uint8)
+    ink = _ink(contrast, bg, p)
     n, components, stats, _ = cv2.connectedComponentsWithStats(ink, connectivity=8)
     area = stats[:, cv2.CC_STAT_AREA].astype(np.float64)
     keep = (area >= p.min_area_px) & (area <= p.max_area_px)
@@ -307,7 +313,7 @@ def merged_pair_centroids(
     if not np.isfinite(mid).all() or u0 < 0 or v0 < 0 or u0 + 2 * r >= g.shape[1] or v0 + 2 * r >= g.shape[0]:
         return nan
     contrast = np.float32(white) - g[v0 : v0 + 2 * r + 1, u0 : u0 + 2 * r + 1].astype(np.float32)
-    ink = (contrast > max(p.min_contrast, p.ink_fraction * white)).astype(np.uint8)
+    ink = _ink(contrast, white, p)
     _, comp = cv2.connectedComponents(ink, connectivity=8)
     at = [comp[int(round(q[1])) - v0, int(round(q[0])) - u0] for q in (a, mid, b)]
     if at[0] == 0 or len(set(at)) != 1:
@@ -325,11 +331,13 @@ def merged_pair_centroids(
         d = x[:, None, :] - c[None, :, :]
         return np.exp(-0.5 * np.einsum("nki,ij,nkj->nk", d, inv, d))
 
-    def model(q):
+    def covariance(q):  # shared by the Gaussians, from its Cholesky factor (log diagonal)
         chol = np.array([[np.exp(q[4]), 0.0], [q[5], np.exp(q[6])]])
-        inv = np.linalg.inv(chol @ chol.T)
+        return chol @ chol.T
+
+    def model(q):
         centres = np.r_[q[:4].reshape(2, 2), fixed]
-        return gauss(centres, inv) @ q[7:]
+        return gauss(centres, np.linalg.inv(covariance(q))) @ q[7:]
 
     sigma = 0.5 * np.sqrt(blob.sum() / (2 * np.pi)) + 0.5
     q0 = np.r_[a, b, np.log(sigma), 0.0, np.log(sigma), np.full(2 + k, y.max())]
@@ -337,8 +345,7 @@ def merged_pair_centroids(
         return nan
     fit = least_squares(lambda q: model(q) - y, q0)
     q = fit.x
-    chol = np.array([[np.exp(q[4]), 0.0], [q[5], np.exp(q[6])]])
-    ev = np.linalg.eigvalsh(chol @ chol.T)
+    ev = np.linalg.eigvalsh(covariance(q))
     rms = np.sqrt(np.mean(fit.fun**2)) / y.max()
     return q[:4].reshape(2, 2), np.array([q[7], q[8], rms, np.sqrt(ev[0] / ev[1])])
 

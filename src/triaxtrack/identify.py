@@ -40,7 +40,7 @@ import numpy as np
 import pandas as pd
 from scipy.spatial import cKDTree
 
-from triaxtrack.detect import ellipse_maps
+from triaxtrack.detect import ellipse_maps, gap_background_centroids, merged_pair_centroids
 from triaxtrack.kit import eq1_dot_id
 
 UNLABELLED = -1
@@ -1072,8 +1072,6 @@ def _recentred_beside_edge(
     """(blob indices, their new distorted centroids) of the labelled dots of ``stripes`` beside a
     dark edge whose two neighbours along the stripe are labelled, re-centred by
     :func:`~triaxtrack.detect.gap_background_centroids`; where that fails, left out."""
-    from triaxtrack.detect import gap_background_centroids
-
     on = np.isin(f.group, list(stripes))
     blob_of = {(f.group[k], int(f.ids[k])): k for k in np.nonzero(on)[0]}
     sel, prev, nxt = [], [], []
@@ -1099,14 +1097,13 @@ def _split_merged_pairs(
     by :func:`~triaxtrack.detect.merged_pair_centroids`.
 
     Two neighbouring unlabelled grid nodes A, B between labelled dots U, D (U, A, B, D along a
-    column or a row) whose images merged (a blob at the midpoint of U and D, unlabelled and
-    ``free``, larger than U and D) are expected at the thirds of U-D. They are labelled when both
-    fitted centres lie within the gate of the thirds, their heights agree within a factor of
-    ``MERGED_HEIGHT_RATIO`` and the fit leaves under ``MERGED_FIT_RMS`` of the blob's contrast.
+    column or a row) whose images merged (a blob at the midpoint of U and D, ``free``: nothing
+    labelled it or turned it down, and larger than U and D) are expected at the thirds of U-D.
+    They are labelled when both fitted centres lie within the gate of the thirds, their heights
+    agree within a factor of ``MERGED_HEIGHT_RATIO`` and the fit leaves under
+    ``MERGED_FIT_RMS`` of the blob's contrast.
     ``uv``: the blobs' (distorted) centroids. The merged blob itself stays unlabelled, with a reason.
     """
-    from triaxtrack.detect import merged_pair_centroids
-
     member = np.nonzero(_is_membrane(f.ids, m))[0]
     labelled = f.ids[member]
     blob_of = pd.Series(member, index=labelled)
@@ -1124,9 +1121,7 @@ def _split_merged_pairs(
         step = (uv[kd] - uv[ku]) / 3
         gate = p.gate * np.linalg.norm(step)
         dist, k = tree.query(uv[ku] + 1.5 * step)
-        if {a, b} & taken or k in split or dist > gate or not free[k] or f.ids[k] != UNLABELLED:
-            continue
-        if area[k] <= max(area[ku], area[kd]):
+        if {a, b} & taken or k in split or dist > gate or not free[k] or area[k] <= max(area[ku], area[kd]):
             continue
         expected = np.array([uv[ku] + step, uv[ku] + 2 * step])
         centres, (ha, hb, rms, roundness) = merged_pair_centroids(
