@@ -120,8 +120,8 @@ def tracks() -> pd.DataFrame:
     reason = rng.choice(reasons, size=cam.size, p=[0.9, 0.04, 0.03, 0.02, 0.01])
     reason[(cam == "cam03") & (frame == 4)] = "not_recorded"
     df = pd.DataFrame({"camera": cam, "frame": frame, "id": tid, "u_px": 1.0, "v_px": 2.0, "area_px": 9.0,
-                       "reason": reason})  # fmt: skip
-    df.loc[df["reason"] != "", ["u_px", "v_px"]] = np.nan
+                       "sigma_px": 0.03, "reason": reason})  # fmt: skip
+    df.loc[df["reason"] != "", ["u_px", "v_px", "sigma_px"]] = np.nan
     return conform(df, TRACKS)
 
 

@@ -162,3 +162,184 @@ def test_camera_above_the_final_top_cap_is_refused(kit_dir, tmp_path):
     cfg = SimulationConfig(cameras=3, frames=3, camera_height_mm=138.0, axial_strain=0.05)
     with pytest.raises(ValueError, match="between the pedestal faces"):
         make_scene(cfg, kit_dir, tmp_path / "t", "t")
+
+
+# ---------------------------------------------------------------- camera and recorder effects
+def _render(test_dir, camera: str = "cam01", frame: int = 0, **changes):
+    """One frame of a simulated test with some settings changed (no preset expansion)."""
+    import dataclasses
+
+    scene = load_scene(test_dir)
+    scene.cfg = dataclasses.replace(scene.cfg, **changes)
+    return scene, *CameraRenderer(scene, camera).render(frame)
+
+
+def test_new_settings_default_to_todays_render(small_test, monkeypatch):
+    """At their defaults the new keys are no-ops: the image is exactly the one of the effects
+    as they were before the keys existed (constant vignetting 0.22, blur, noise), the truth is
+    the small test's own, and the cameras do not move."""
+    import zlib
+
+    from triaxtrack.simulate import VIGNETTING, make_cameras
+
+    cfg = SimulationConfig()
+    assert (cfg.vignetting, cfg.light_gradient, cfg.exposure_drift) == (VIGNETTING, 0.0, 0.0) == (0.22, 0, 0)
+    assert (cfg.timestamp_overlay, cfg.camera_tilt_deg, cfg.occluder_z_mm) == (False, 0.0, None)
+    scene, img, obs = _render(small_test, "cam02", 1)
+    captured = {}
+    monkeypatch.setattr(CameraRenderer, "_camera_effects", lambda self, im, k: captured.setdefault("x", im))
+    CameraRenderer(scene, "cam02").render(1)
+    raw = captured["x"]
+    cam = scene.cameras["cam02"]
+    h, w = raw.shape
+    yy, xx = np.mgrid[0:h, 0:w]
+    r2 = ((xx - cam.K[0, 2]) ** 2 + (yy - cam.K[1, 2]) ** 2) / ((w / 2) ** 2 + (h / 2) ** 2)
+    before = raw * (1 - 0.22 * r2)  # the effects as they were (no blur in this test)
+    rng = np.random.default_rng([scene.cfg.seed, zlib.crc32(b"cam02"), 1])
+    noise = rng.standard_normal(before.shape, dtype=np.float32)
+    before = before + scene.cfg.noise_sigma * noise * np.sqrt(np.maximum(before, 1) / 128)
+    assert np.array_equal(img, np.clip(np.round(before), 0, 255).astype(np.uint8))
+    truth = pd.read_parquet(small_test / "truth" / "observations.parquet")
+    ref = truth[(truth.camera == "cam02") & (truth.frame == 1)].sort_values("id")
+    assert list(ref.id) == sorted(obs.id)
+    a, b = (
+        make_cameras(SimulationConfig(cameras=5)),
+        make_cameras(SimulationConfig(cameras=5, camera_tilt_deg=0.0)),
+    )
+    assert all(np.array_equal(x.R, y.R) and np.array_equal(x.K, y.K) for x, y in zip(a, b, strict=True))
+
+
+def test_nvr_preset_and_explicit_keys():
+    cfg = SimulationConfig.from_dict({"preset": "nvr", "crf": 30})
+    assert (cfg.codec, cfg.crf, cfg.noise_sigma, cfg.light_gradient, cfg.vignetting) == (
+        "h265",
+        30,
+        4.0,
+        0.3,
+        0.35,
+    )
+    assert cfg.timestamp_overlay and cfg.exposure_drift == 0.03
+    assert cfg.blur_sigma_px == 1.0  # a soft fixed-focus lens, at any size (the issue's realistic footage)
+    assert SimulationConfig.from_dict({"preset": "nvr", "width": 3840, "height": 2160}).blur_sigma_px == 1.0
+    assert SimulationConfig.from_dict({"preset": "clean"}) == SimulationConfig()
+    for bad, key in (
+        ({"preset": "4k"}, "preset"),
+        ({"light_gradient": 1.5}, "light_gradient"),
+        ({"vignetting": -0.1}, "vignetting"),
+        ({"exposure_drift": "x"}, "exposure_drift"),
+        ({"timestamp_overlay": "yes"}, "timestamp_overlay"),
+        ({"camera_tilt_deg": -2}, "camera_tilt_deg"),
+        ({"occluder_z_mm": [10]}, "occluder_z_mm"),
+        ({"occluder_z_mm": [20, 10]}, "occluder_z_mm"),
+    ):
+        with pytest.raises(ValueError, match=key):
+            SimulationConfig.from_dict(bad)
+
+
+def test_timestamp_overlay_is_bright_text_and_hides_its_targets(small_test, monkeypatch):
+    """The overlay's box holds white text (1 s of test time per change) and no truth target
+    touches it; a box moved over the specimen removes exactly the targets under it."""
+    from triaxtrack import footage
+
+    assert footage.timestamp_text(0, 15.0) == "2026-11-25 14:03:27"
+    assert footage.timestamp_text(14, 15.0) == "2026-11-25 14:03:27"
+    assert footage.timestamp_text(15, 15.0) == "2026-11-25 14:03:28"
+    _, plain, obs_plain = _render(small_test, noise_sigma=0.0)
+    _, img, obs = _render(small_test, noise_sigma=0.0, timestamp_overlay=True)
+    x0, y0, x1, y1 = footage.overlay_box(960, 540)
+    assert x0 < 30 and y0 < 30 and 150 < x1 - x0 < 400 and 10 < y1 - y0 < 40  # top-left, scaled
+    inside = img[y0 : y1 + 1, x0 : x1 + 1]
+    assert (inside >= 240).sum() > 0.1 * inside.size and (plain[y0 : y1 + 1, x0 : x1 + 1] < 60).all()
+    outside = np.ones(img.shape, bool)
+    outside[y0 : y1 + 1, x0 : x1 + 1] = False
+    assert np.array_equal(img[outside], plain[outside])  # drawn in the box only
+    assert (obs.u_px > x1).all() or (obs.v_px > y1).all()
+    # the truth rule, with the box moved over the middle of the picture
+    box = (400, 200, 560, 330)
+    monkeypatch.setattr(footage, "overlay_box", lambda w, h: box)
+    _, _, moved = _render(small_test, noise_sigma=0.0, timestamp_overlay=True)
+    gone = obs_plain[~obs_plain.id.isin(moved.id)]
+    assert len(gone) > 50 and set(moved.id) <= set(obs_plain.id)
+    assert (
+        gone.u_px.between(box[0] - 12, box[2] + 12).all()
+        and gone.v_px.between(box[1] - 12, box[3] + 12).all()
+    )
+    deep = obs_plain.u_px.between(box[0], box[2]) & obs_plain.v_px.between(box[1], box[3])
+    assert obs_plain[deep].id.isin(gone.id).all()
+
+
+def test_light_gradient_darkens_one_side_by_the_set_amount(small_test):
+    from triaxtrack import footage
+
+    field = footage.gradient_field(640, 360, 0.3, 0.0)  # lamp on the left
+    assert field[:, 0] == pytest.approx(1.0) and field[:, -1] == pytest.approx(0.7)
+    left, right = field[:, :320].mean(), field[:, 320:].mean()
+    assert left - right == pytest.approx(0.3 * 320 / 639, rel=1e-6)  # half-images: half the ramp
+    _, flat, _ = _render(small_test, "cam03", noise_sigma=0.0, vignetting=0.0)
+    scene, lit, _ = _render(small_test, "cam03", noise_sigma=0.0, vignetting=0.0, light_gradient=0.3)
+    direction = footage.gradient_direction(scene.cfg.seed, "cam03")
+    expected = footage.gradient_field(960, 540, 0.3, direction)
+    bright = flat > 100
+    ratio = lit[bright] / flat[bright]
+    assert np.abs(ratio - expected[bright]).max() < 0.01  # rounding to grey levels only
+    span = np.ptp(expected[bright])
+    print(f"cam03: dark side at {np.rad2deg(direction):.0f} deg, ratio {ratio.min():.3f}..{ratio.max():.3f}")
+    assert np.ptp(ratio) == pytest.approx(span, abs=0.02) and span > 0.05  # rounding of both images
+
+
+def test_exposure_drift_is_slow_and_bounded():
+    from triaxtrack import footage
+
+    p = np.linspace(0, 1, 101)
+    for cam in ("cam01", "cam02", "cam07"):
+        g = np.array([footage.exposure_gain(q, 0.05, 3, cam) for q in p])
+        assert g[0] == 1.0 and np.abs(g - 1).max() <= 0.05 + 1e-12 and np.abs(g - 1).max() > 0.02
+        assert np.abs(np.diff(g)).max() < 0.05 * np.pi / 100 + 1e-12  # smooth: no jumps
+
+
+def test_occluder_hides_exactly_the_membrane_in_its_z_range(small_test):
+    """A band at z 60..70 mm: the targets removed from the truth are the membrane dots whose
+    image reaches the band's pixels (centre within a dot radius and a pixel of it), every dot
+    centred in it is removed and every dot clear of it is kept."""
+    from triaxtrack.simulate import GREY_OCCLUDER, target_positions
+
+    z0, z1 = 60.0, 70.0
+    _, plain, obs_plain = _render(small_test, "cam01", 3, noise_sigma=0.0)
+    scene, img, obs = _render(small_test, "cam01", 3, noise_sigma=0.0, occluder_z_mm=(z0, z1))
+    t = scene.table.set_index("id")
+    z = target_positions(scene, 3).set_index("id").z_mm
+    gone = obs_plain[~obs_plain.id.isin(obs.id)].id
+    assert set(obs.id) <= set(obs_plain.id) and len(gone) > 30
+    assert (t.loc[gone, "surface"] == "membrane").all()
+    # half a dot, plus the pixel its image box is widened by (about 0.5 mm here: 960 px wide)
+    reach = t.diameter_mm / 2 + 0.8
+    assert (z[gone] > z0 - reach[gone]).all() and (z[gone] < z1 + reach[gone]).all()
+    on_membrane = (t.loc[obs_plain.id, "surface"] == "membrane").to_numpy()
+    centred = obs_plain.id[z.loc[obs_plain.id].between(z0, z1).to_numpy() & on_membrane]
+    assert centred.isin(gone).all()
+    zs, rs = z.loc[obs_plain.id].to_numpy(), reach.loc[obs_plain.id].to_numpy()
+    clear = obs_plain.id[(zs < z0 - rs - 0.4) | (zs > z1 + rs + 0.4)]
+    assert clear.isin(obs.id).all()
+    darker = (plain.astype(int) - img) > 20
+    assert darker.sum() > 1000 and np.median(img[darker]) <= GREY_OCCLUDER  # (vignetting)
+
+
+def test_camera_tilt_stays_within_bounds():
+    """Each camera is pitched about its own x axis by its seeded angle, within +- the setting;
+    nothing else about it changes (the tilt has a generator of its own)."""
+    from triaxtrack.simulate import camera_pitch_deg, make_cameras
+
+    cfg = SimulationConfig(cameras=16, camera_tilt_deg=4.0)
+    level, tilted = make_cameras(SimulationConfig(cameras=16)), make_cameras(cfg)
+    pitches = []
+    for a, b in zip(level, tilted, strict=True):
+        assert np.array_equal(a.K, b.K) and np.array_equal(a.dist, b.dist)
+        assert np.allclose(a.center, b.center, atol=1e-9)
+        P = b.R @ a.R.T  # a rotation about the camera's x axis
+        assert np.allclose(P[0], [1, 0, 0], atol=1e-12) and np.allclose(P[:, 0], [1, 0, 0], atol=1e-12)
+        pitch = np.rad2deg(np.arctan2(-P[2, 1], P[1, 1]))
+        assert pitch == pytest.approx(camera_pitch_deg(cfg, b.name), abs=1e-9)
+        up = np.rad2deg(np.arcsin(b.R[2, 2]) - np.arcsin(a.R[2, 2]))  # line of sight turns up
+        assert up == pytest.approx(pitch, abs=0.05)
+        pitches.append(pitch)
+    assert max(np.abs(pitches)) <= 4.0 and np.ptp(pitches) > 4.0

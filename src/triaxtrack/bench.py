@@ -11,7 +11,7 @@ veryfast; all in a child process), and on that one video this prints
   :func:`triaxtrack.identify.label_frame`), and their ratio;
 * the tracking cost per camera-frame beyond decoding: (pipeline - decode) / frames, and timed
   directly on a few frames held in memory (``--hold``), with the share of ``_step`` and
-  ``measure_blobs``;
+  ``measure_targets``;
 * the brute-force alternative: ``label_frame`` (detection and identification) on every frame;
 * the same linking step by trackpy (``trackpy.link`` on every frame's ``detect_blobs``; optional:
   ``pip install -e '.[bench]'``), with how many of its links break or swap our IDs;
@@ -299,7 +299,7 @@ def bench_tracking(width: int, height: int, frames: int, hold: int = 6, test_fra
         best = None
         _reset_peak()
         for _ in range(3):
-            with _Timed(track, "_step") as step, _Timed(track, "measure_blobs") as meas:
+            with _Timed(track, "_step") as step, _Timed(track, "measure_targets") as meas:
                 t0 = time.perf_counter()
                 track.track_frames(held, labels, camera, [k for k, _ in held], tcfg)
                 total = time.perf_counter() - t0
@@ -466,7 +466,7 @@ def print_tracking(r: dict, benchmarks: Path) -> None:
             f"track_frames on {r['held']} held frames, best of 3",
         ),
         ("  of which _step", f"{r['step_s'] * 1e3:.1f}", "ms/frame", "the rest: the per-frame table rows"),
-        ("  of which measure_blobs", f"{r['measure_s'] * 1e3:.1f}", "ms/frame", "inside _step"),
+        ("  of which measure_targets", f"{r['measure_s'] * 1e3:.1f}", "ms/frame", "inside _step"),
         ("Brute force: detect and label every frame", "", "", ""),
         (
             "label_frame per frame",

@@ -29,6 +29,8 @@ def _simulate(args: argparse.Namespace) -> int:
         for f in fields(SimulationConfig)
         if getattr(args, f.name, None) is not None
     }
+    if args.preset is not None:
+        opts["preset"] = args.preset  # the keys given on the command line override it
     cfg = SimulationConfig.from_dict(opts)
     out = Path(args.out)
     kit_dir = out / "kit"
@@ -86,16 +88,25 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--design", default=str(DEFAULT_DESIGN))
     s.add_argument("--name", default=None, help="test name (default: the folder name)")
     s.add_argument("--chunk-size", type=int, default=50)
-    from triaxtrack.simulate import SimulationConfig
+    from triaxtrack.simulate import PRESETS, SimulationConfig
 
+    s.add_argument("--preset", choices=sorted(PRESETS), default=None,
+                   help="named settings (nvr: realistic NVR footage); other options override it")  # fmt: skip
     for f in fields(SimulationConfig):
-        typ = {"int": int, "float": float, "str": str}.get(
-            f.type if isinstance(f.type, str) else f.type.__name__
-        )
+        type_name = f.type if isinstance(f.type, str) else f.type.__name__
+        flag = f"--{f.name.replace('_', '-')}"
+        if type_name == "bool":
+            s.add_argument(flag, dest=f.name, action=argparse.BooleanOptionalAction, default=None,
+                           help=f"default {f.default}")  # fmt: skip
+            continue
+        if type_name == "tuple[float, float] | None":
+            s.add_argument(flag, dest=f.name, type=float, nargs=2, metavar=("LOW", "HIGH"), default=None,
+                           help=f"default {f.default}")  # fmt: skip
+            continue
+        typ = {"int": int, "float": float, "str": str}.get(type_name)
         if typ is None:
             continue  # per-camera mappings (start_offset_s, dropped_frames): config files only
-        s.add_argument(f"--{f.name.replace('_', '-')}", dest=f.name, type=typ, default=None,
-                       help=f"default {f.default}")  # fmt: skip
+        s.add_argument(flag, dest=f.name, type=typ, default=None, help=f"default {f.default}")
     s.set_defaults(func=_simulate)
 
     c = sub.add_parser("check-sim", help="measure a simulated test's rendered dots against its truth")

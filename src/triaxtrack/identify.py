@@ -59,6 +59,7 @@ FAR_PX = 1e9
 # 0.5 px the dots kept beside a band were as accurate as the rest on four tests (membrane p99.9
 # and maximum error unchanged); 1.0 px left 80-175 more a test unlabelled
 BAND_BLUR_PX = 0.5
+BLUR_REACH = 2.0  # a blurred edge darkens pixels this many lens-blur sigmas beyond it
 GAP_ACROSS_PX = 1.0  # a re-centred dot's window reaches this far across beyond its moment ellipse
 # two membrane dots merged in one blob (at 10 % strain, 720p) and fitted apart: on the one test
 # of four with them, 228 dots were 0.11 px off at the median and 0.30 px at worst, so they are
@@ -961,6 +962,7 @@ def identify(
     where the dot could not be labelled beyond doubt; a merged pair's two dots have a row each.
     """
     p = params or IdentifyParams()
+    blur_px = float(blobs.blur.iloc[0]) if "blur" in blobs and len(blobs) else 0.0
     uv = blobs[["u_px", "v_px"]].to_numpy(np.float64, copy=True)
     pos = undistort(uv) if len(uv) else uv.copy()
     invertible = np.isfinite(pos).all(axis=1)
@@ -995,7 +997,8 @@ def identify(
             across = blobs.minor_px.to_numpy()[order] / design["cell_targets"]["longitudinal_dot_diameter"]
             half = design["cell_targets"]["longitudinal_band_width"] / 2
             radius = half * np.maximum(across[:-1], across[1:])
-            pad = blobs.major_px.to_numpy() / 2 + BAND_BLUR_PX
+            # the band's blurred edge reaches two lens-blur sigmas beyond its printed edge
+            pad = blobs.major_px.to_numpy() / 2 + max(BAND_BLUR_PX, BLUR_REACH * blur_px)
             hide = _near_polyline(pos, line, radius, pad) & pool.free
             pool.free[hide] = False
             f.reason[hide] = "on a longitudinal stripe's band"

@@ -11,7 +11,11 @@ filled with exact area coverage (:mod:`triaxtrack.raster`),
 so a dot's rendered centroid differs from the exact image of its centre only by the physical
 bias of perspective and refraction across the dot (measured by the tests). What is drawn,
 back to front: background, pedestals (sides and the visible end faces), their white labels and
-black ink, the membrane, its dots, then the white bands and black ink on the cell's outer wall.
+black ink, the membrane, its dots, the optional occluder band (``occluder_z_mm``), then the white
+bands and black ink on the cell's outer wall. Camera and recorder effects follow
+(:mod:`triaxtrack.footage`: light, exposure, blur, the timestamp overlay, noise; the ``nvr``
+preset turns them on), and the truth lists only the targets nothing hides
+(:meth:`CameraRenderer._observations`).
 Faces turned away from the camera are culled (the specimen and pedestals are convex). Not
 drawn: the backs of the cell's far-side white bands seen through the water (for the default
 ring they would show above the top pedestal, near the top of the image, where the render leaves
@@ -35,6 +39,7 @@ import numpy as np
 import pandas as pd
 import yaml
 
+from triaxtrack import footage
 from triaxtrack.centroid import local_centroid
 from triaxtrack.deformation import Deformation
 from triaxtrack.kit import (
@@ -58,7 +63,8 @@ GREY_PEDESTAL_FACE = 95.0
 GREY_MEMBRANE = 195.0
 GREY_LABEL = 230.0
 GREY_INK = 22.0
-VIGNETTING = 0.22  # relative fall-off of light at the image corners
+VIGNETTING = 0.22  # default relative fall-off of light at the image corners
+GREY_OCCLUDER = 70.0  # the dark-grey band of `occluder_z_mm` (a strap or a shadowing bar)
 # tessellation of the untextured surfaces (their outlines only; dots are drawn exactly)
 MEMBRANE_QUADS = (96, 48)  # (theta, Z)
 PEDESTAL_QUADS = 72
@@ -69,6 +75,11 @@ JITTER_ROTATION_DEG = 0.7
 JITTER_FOCAL_REL = 0.01
 JITTER_PRINCIPAL_REL = 0.005
 JITTER_K1, JITTER_K2, JITTER_P = 0.02, 0.01, 3e-4
+TILT_STREAM = 97  # third element of the per-camera seed of `camera_tilt_deg` (footage.camera_rng)
+MAX_TILT_DEG = 30.0  # largest camera_tilt_deg accepted (the specimen leaves the picture well before)
+OCCLUDER_QUADS = 192  # theta tessellation of the occluder band (chords: < 0.1 px from the exact edge)
+OCCLUDER_ROW_MM = 3.0  # the band is drawn in rows of at most this height (follows the bulge)
+OCCLUDER_NEWTON_STEPS = 3  # fixed-point steps from the soil-surface height to the printed surface's
 EDGE_MARGIN_PX = 2.0  # a target is "seen" only if its whole image is this far inside the frame
 OCCLUSION_TOL = 0.01  # coverage by a cell band above which a target behind it is hidden
 CHECK_SAMPLE = 300  # dots per surface, camera and frame measured by check_simulation
@@ -128,6 +139,13 @@ class SimulationConfig:
     k2: float = 0.08
     noise_sigma: float = 1.5
     blur_sigma_px: float = 0.0
+    # camera and recorder effects (triaxtrack.footage); all off / today's value by default
+    vignetting: float = VIGNETTING  # light fall-off at the image corners (relative)
+    light_gradient: float = 0.0  # lamp on one side: the dark side this much darker (relative)
+    exposure_drift: float = 0.0  # largest relative exposure-gain change over the test
+    timestamp_overlay: bool = False  # burn a "2026-11-25 14:03:27" date/time into the top-left corner
+    camera_tilt_deg: float = 0.0  # each camera's pitch drawn uniformly in +- this, degrees
+    occluder_z_mm: tuple[float, float] | None = None  # (z0, z1): a dark band hides the membrane there
     calibration_images: int = 20  # board images per camera (test-folder.md: 10-20); 40 % across image corners
     min_view_cos: float = 0.3
     # per camera (by name): test-clock time of its first frame, a whole number of frames >= 0
@@ -137,11 +155,29 @@ class SimulationConfig:
 
     @staticmethod
     def from_dict(d: dict) -> SimulationConfig:
+        """Settings from a mapping of field names (config files, the CLI, scene.json).
+
+        The extra key ``preset`` (``clean`` or ``nvr``, see ``PRESETS``) fills in a set of keys
+        first; keys given explicitly in ``d`` override it. ValueError naming the key for an
+        unknown key or preset, or a value out of range.
+        """
+        d = apply_preset(d)
         known = {f.name for f in fields(SimulationConfig)}
         unknown = set(d) - known
         if unknown:
-            raise ValueError(f"unknown simulation settings: {sorted(unknown)}; known: {sorted(known)}")
+            raise ValueError(
+                f"unknown simulation settings: {sorted(unknown)}; known: {sorted(known | {'preset'})}"
+            )
+        if d.get("occluder_z_mm") is not None:
+            z = d["occluder_z_mm"]
+            if isinstance(z, (str, bytes)) or not hasattr(z, "__len__") or len(z) != 2:
+                raise ValueError(f"occluder_z_mm must be null or [z0, z1] in mm, not {z!r}")
+            try:
+                d = {**d, "occluder_z_mm": (float(z[0]), float(z[1]))}
+            except (TypeError, ValueError):
+                raise ValueError(f"occluder_z_mm must be null or [z0, z1] in mm, not {z!r}") from None
         cfg = SimulationConfig(**d)
+        _check_effects(cfg)
         if cfg.codec not in ("h264", "h265"):
             raise ValueError(f"codec must be h264 or h265, not {cfg.codec!r}")
         if cfg.frames < 2 or cfg.cameras < 1:
@@ -154,6 +190,64 @@ class SimulationConfig:
         for cam in names:
             recorded_frames(cfg, cam)  # checks offsets and drops
         return cfg
+
+
+# Named sets of settings for `preset` (SimulationConfig.from_dict, `triaxtrack simulate --preset`).
+# nvr: a 4K surveillance camera recorded by a network video recorder: H.265 at a low bitrate,
+# sensor noise, a soft fixed-focus lens, a lamp on one side, a wide-angle lens's vignetting, the
+# recorder's burned-in date/time and a slowly drifting exposure. Its lens blur is NVR_LENS_BLUR_PX
+# at every image size (a soft fixed-focus lens: 0.7-1.2 px). At 1280 x 720 it nearly closes the
+# 1 px gaps between the membrane's large dots: the independent check, which thresholds, then
+# matches fewer of them (69 % of the membrane's on a 720p test), while the physics is unchanged.
+NVR_LENS_BLUR_PX = 1.0
+PRESETS: dict[str, dict] = {
+    "clean": {},
+    "nvr": {
+        "codec": "h265",
+        "crf": 28,
+        "noise_sigma": 4.0,
+        "blur_sigma_px": NVR_LENS_BLUR_PX,
+        "light_gradient": 0.3,
+        "vignetting": 0.35,
+        "timestamp_overlay": True,
+        "exposure_drift": 0.03,
+    },
+}
+
+
+def preset_settings(name: str) -> dict:
+    """The settings a preset sets (``PRESETS``)."""
+    if name not in PRESETS:
+        raise ValueError(f"preset must be one of {sorted(PRESETS)}, not {name!r}")
+    out = dict(PRESETS[name])
+    return out
+
+
+def apply_preset(d: dict) -> dict:
+    """A copy of settings ``d`` with its ``preset`` (if any) expanded: the preset's keys
+    (:func:`preset_settings`), then ``d``'s own keys over
+    them; the ``preset`` key itself is removed."""
+    d = dict(d)
+    name = d.pop("preset", None)
+    if name is None:
+        return d
+    return {**preset_settings(name), **d}
+
+
+def _check_effects(cfg: SimulationConfig) -> None:
+    """ValueError naming the key for a camera or recorder effect out of range."""
+    for key in ("vignetting", "light_gradient", "exposure_drift"):
+        v = getattr(cfg, key)
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0 <= v < 1:
+            raise ValueError(f"{key} must be a number in [0, 1), not {v!r}")
+    if not isinstance(cfg.timestamp_overlay, bool):
+        raise ValueError(f"timestamp_overlay must be true or false, not {cfg.timestamp_overlay!r}")
+    t = cfg.camera_tilt_deg
+    if isinstance(t, bool) or not isinstance(t, (int, float)) or not 0 <= t <= MAX_TILT_DEG:
+        raise ValueError(f"camera_tilt_deg must be a number in [0, {MAX_TILT_DEG}] degrees, not {t!r}")
+    z = cfg.occluder_z_mm
+    if z is not None and not (np.isfinite(z).all() and z[0] < z[1]):
+        raise ValueError(f"occluder_z_mm must be [z0, z1] with z0 < z1, mm, not {list(z)}")
 
 
 def camera_names(n: int) -> list[str]:
@@ -198,7 +292,13 @@ def look_at(center: np.ndarray, target: np.ndarray) -> np.ndarray:
 
 
 def make_cameras(cfg: SimulationConfig) -> list[Camera]:
-    """A seeded ring of cameras around the cell, all looking at the axis."""
+    """A seeded ring of cameras around the cell, all looking at the axis.
+
+    Each camera is placed with small seeded jitters (``JITTER_*``); with ``camera_tilt_deg`` it
+    is then pitched about its own image x axis by an angle drawn uniformly in +- that many
+    degrees (positive: the line of sight turns up, towards +z), from a generator of its own
+    (``TILT_STREAM``), so the other parameters do not change with the tilt.
+    """
     rng = np.random.default_rng(cfg.seed)
     cams = []
     w, h = cfg.width, cfg.height
@@ -210,6 +310,8 @@ def make_cameras(cfg: SimulationConfig) -> list[Camera]:
         R0 = look_at(c, np.array([0.0, 0.0, cfg.camera_height_mm]))
         jitter = np.deg2rad(rng.uniform(-1, 1, 3) * JITTER_ROTATION_DEG)
         R = cv2.Rodrigues(jitter)[0] @ R0
+        if cfg.camera_tilt_deg > 0:
+            R = tilt_rotation(camera_pitch_deg(cfg, name)) @ R
         f = cfg.focal_factor * w * (1 + rng.uniform(-1, 1) * JITTER_FOCAL_REL)
         cx = (w - 1) / 2 + rng.uniform(-1, 1) * JITTER_PRINCIPAL_REL * w
         cy = (h - 1) / 2 + rng.uniform(-1, 1) * JITTER_PRINCIPAL_REL * h
@@ -223,6 +325,18 @@ def make_cameras(cfg: SimulationConfig) -> list[Camera]:
         ])  # fmt: skip
         cams.append(Camera(name, w, h, K, dist, R, -R @ c))
     return cams
+
+
+def camera_pitch_deg(cfg: SimulationConfig, camera: str) -> float:
+    """The seeded pitch of a camera, degrees, uniform in +- ``camera_tilt_deg``."""
+    rng = footage.camera_rng(cfg.seed, camera, TILT_STREAM)
+    return float(rng.uniform(-1, 1) * cfg.camera_tilt_deg)
+
+
+def tilt_rotation(pitch_deg: float) -> np.ndarray:
+    """(3, 3) rotation in the camera frame (x right, y down, z forward) turning the line of
+    sight up by ``pitch_deg`` about the camera's x axis (applied as ``R' = P @ R``)."""
+    return cv2.Rodrigues(np.r_[-np.deg2rad(pitch_deg), 0.0, 0.0])[0]
 
 
 def deformation_for(cfg: SimulationConfig, design: dict) -> Deformation:
@@ -420,9 +534,11 @@ class CameraRenderer:
         self._xy_prev: dict[str, np.ndarray] = {}
         self._pinv: dict[str, np.ndarray] = {}
         h, w = self.cam.height, self.cam.width
-        yy, xx = np.mgrid[0:h, 0:w]
-        r2 = ((xx - self.cam.K[0, 2]) ** 2 + (yy - self.cam.K[1, 2]) ** 2) / ((w / 2) ** 2 + (h / 2) ** 2)
-        self._light = 1 - VIGNETTING * r2
+        cfg = scene.cfg
+        self._light = footage.vignetting_field(w, h, self.cam.K[0, 2], self.cam.K[1, 2], cfg.vignetting)
+        if cfg.light_gradient > 0:
+            direction = footage.gradient_direction(cfg.seed, camera)
+            self._light = self._light * footage.gradient_field(w, h, cfg.light_gradient, direction)
         s = scene.deformation
         nt, nz = MEMBRANE_QUADS
         th, zz = np.meshgrid(2 * np.pi * np.arange(nt + 1) / nt, np.linspace(0, s.height, nz + 1))
@@ -528,6 +644,38 @@ class CameraRenderer:
         out.append((np.vstack(vs), np.concatenate(cs), GREY_MEMBRANE))
         return out
 
+    def _occluder_polygons(self, p: float) -> tuple[np.ndarray, np.ndarray]:
+        """Image polygons (packed vertices, counts) of the front-facing membrane surface
+        between cell-frame heights ``occluder_z_mm`` at progress p (the occluder band).
+
+        The band's edges are the printed surface's points at those heights (z in the cell frame,
+        so the material slides under a fixed band as the specimen compresses), clipped to the
+        membrane (0 .. the current height); empty if the band misses the membrane.
+        """
+        sc = self.scene
+        s = sc.deformation
+        z0, z1 = np.clip(np.asarray(sc.cfg.occluder_z_mm, float), 0.0, s.current_height(p))
+        if z1 <= z0:
+            return np.zeros((0, 2)), np.zeros(0, np.int64)
+        nt = OCCLUDER_QUADS
+        nz = int(np.ceil((z1 - z0) / OCCLUDER_ROW_MM))
+        th = 2 * np.pi * np.arange(nt + 1) / nt
+        T, ZC = np.meshgrid(th, np.linspace(z0, z1, nz + 1))
+        Z = material_height(s, ZC.ravel(), T.ravel(), p)
+        pts, nrm = s.outer_surface(T.ravel(), Z, p)
+        c = self.cam.center
+        rough = np.einsum("ij,ij->i", nrm, c - pts) > -0.5 * np.linalg.norm(c - pts, axis=1)
+        uv, d2 = self._project("occluder", pts, True, rough)
+        uv = uv.reshape(nz + 1, nt + 1, 2)
+        cos = (-np.einsum("ij,ij->i", nrm, d2)).reshape(nz + 1, nt + 1)
+        qcos = cos[:-1, :-1] + cos[:-1, 1:] + cos[1:, 1:] + cos[1:, :-1]
+        vs, cs = [], []
+        for i in range(nz):
+            v, cnt = _strip_polygons(uv[i], uv[i + 1], qcos[i] > 0)
+            vs.append(v)
+            cs.append(cnt)
+        return np.vstack(vs), np.concatenate(cs)
+
     def render(self, frame: int) -> tuple[np.ndarray, pd.DataFrame]:
         """The camera's uint8 grey image at ``frame`` and the exact observations it holds."""
         sc, cam = self.scene, self.cam
@@ -539,15 +687,23 @@ class CameraRenderer:
             paint_into(img, verts, counts, grey, SUBROWS_PLAIN)
         obs = []
         band_cov = None
-        order = [s for s in sc.shapes if s.surface.startswith("pedestal")]
+        occluder_cov = None
+        order: list = [s for s in sc.shapes if s.surface.startswith("pedestal")]
         order += [None]  # the membrane outline goes here
         order += [s for s in sc.shapes if s.surface == "membrane"]
+        order += ["occluder"] if sc.cfg.occluder_z_mm is not None else []
         order += [s for s in sc.shapes if s.surface == "cell_outer"]
         pending = []
         for shapes in order:
             if shapes is None:
                 verts, counts, grey = layers[4]
                 paint_into(img, verts, counts, grey, SUBROWS_PLAIN)
+                continue
+            if isinstance(shapes, str):  # the occluder band, over the membrane and its dots
+                verts, counts = self._occluder_polygons(p)
+                r0, cov = paint_into(img, verts, counts, GREY_OCCLUDER, SUBROWS_PLAIN)
+                occluder_cov = np.zeros((h, w))
+                occluder_cov[r0 : r0 + len(cov)] = cov
                 continue
             vuv, counts, keep, cuv, cos = self._shape_layer(shapes, p)
             ink = shapes.layer == "ink"
@@ -559,12 +715,22 @@ class CameraRenderer:
             if shapes.layer == "ink":
                 pending.append((shapes, vuv, counts, keep, cuv, cos))
         for shapes, vuv, counts, keep, cuv, cos in pending:
-            obs.append(self._observations(shapes, vuv, counts, keep, cuv, cos, band_cov, frame))
+            obs.append(self._observations(shapes, vuv, counts, keep, cuv, cos, band_cov, occluder_cov, frame))
         img = self._camera_effects(img, frame)
         return img, pd.concat(obs, ignore_index=True)
 
-    def _observations(self, shapes, vuv, counts, keep, cuv, cos, band_cov, frame) -> pd.DataFrame:
-        """Targets whose whole image is in the frame, facing enough, and not behind a band."""
+    def _observations(
+        self, shapes, vuv, counts, keep, cuv, cos, band_cov, occluder_cov, frame
+    ) -> pd.DataFrame:
+        """The targets a user could see in this image: the truth observations.
+
+        A target is seen when its whole image is ``EDGE_MARGIN_PX`` inside the frame, it faces
+        the camera (``min_view_cos``), and nothing hides any of it: a white band of the cell
+        wall (``band_cov``: coverage above ``OCCLUSION_TOL`` anywhere in the target's image box),
+        the occluder band (``occluder_cov``, same rule; targets of the cell wall are in front of
+        it) or the timestamp overlay (``footage.overlay_box``: the target's image box comes within
+        ``EDGE_MARGIN_PX`` of it). ``triaxtrack score`` counts coverage as labelled / seen here.
+        """
         cam = self.cam
         ids_kept = shapes.ids[keep]
         starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
@@ -581,16 +747,12 @@ class CameraRenderer:
         centre = pd.DataFrame({"id": shapes.ids, "u_px": cuv[:, 0], "v_px": cuv[:, 1], "cos": cos})
         centre = centre.drop_duplicates("id").set_index("id").loc[box.index]
         centre = centre[centre.cos >= self.scene.cfg.min_view_cos]
-        if shapes.surface != "cell_outer" and band_cov is not None and len(centre):
-            b = box.loc[centre.index]
-            hidden = [
-                band_cov[
-                    int(np.floor(r.v0)) : int(np.ceil(r.v1)) + 1, int(np.floor(r.u0)) : int(np.ceil(r.u1)) + 1
-                ].max()
-                > OCCLUSION_TOL
-                for r in b.itertuples()
-            ]
-            centre = centre[~np.array(hidden, bool)]
+        for cov in (band_cov, occluder_cov):
+            if shapes.surface != "cell_outer" and cov is not None and len(centre):
+                centre = centre[~_covered(cov, box.loc[centre.index])]
+        if self.scene.cfg.timestamp_overlay and len(centre):
+            b = box.loc[centre.index, ["u0", "v0", "u1", "v1"]].to_numpy()
+            centre = centre[~footage.boxes_overlap(b, footage.overlay_box(cam.width, cam.height), m)]
         return pd.DataFrame({
             "camera": cam.name,
             "frame": np.int64(frame),
@@ -600,15 +762,58 @@ class CameraRenderer:
         })  # fmt: skip
 
     def _camera_effects(self, img: np.ndarray, frame: int) -> np.ndarray:
-        """Vignetting, optional blur, sensor noise (seeded per camera and frame), 8-bit."""
+        """Camera and recorder effects, in the order they happen (:mod:`triaxtrack.footage`):
+        light (vignetting, light gradient, exposure drift), optional blur, the timestamp
+        overlay, sensor noise (seeded per camera and frame), rounding to 8 bits."""
         cfg, cam = self.scene.cfg, self.cam
         img = img * self._light
+        if cfg.exposure_drift > 0:
+            gain = footage.exposure_gain(progress(frame, cfg.frames), cfg.exposure_drift, cfg.seed, cam.name)
+            img = img * gain
         if cfg.blur_sigma_px > 0:
             img = cv2.GaussianBlur(img, (0, 0), cfg.blur_sigma_px)
+        if cfg.timestamp_overlay:
+            img = footage.draw_timestamp(img, footage.timestamp_text(frame, cfg.fps))
         rng = np.random.default_rng([cfg.seed, zlib.crc32(cam.name.encode()), frame])
         noise = rng.standard_normal(img.shape, dtype=np.float32)
         img = img + cfg.noise_sigma * noise * np.sqrt(np.maximum(img, 1) / 128)  # shot-noise-like
         return np.clip(np.round(img), 0, 255).astype(np.uint8)
+
+
+def _covered(cov: np.ndarray, boxes: pd.DataFrame) -> np.ndarray:
+    """Per image box (rows with ``u0, v0, u1, v1``, pixels): is the (h, w) coverage ``cov``
+    above ``OCCLUSION_TOL`` anywhere in the pixels the box touches?"""
+    hit = [
+        cov[int(np.floor(r.v0)) : int(np.ceil(r.v1)) + 1, int(np.floor(r.u0)) : int(np.ceil(r.u1)) + 1].max()
+        > OCCLUSION_TOL
+        for r in boxes.itertuples()
+    ]
+    return np.array(hit, bool)
+
+
+def material_height(deformation: Deformation, z: np.ndarray, theta: np.ndarray, p: float) -> np.ndarray:
+    """Material height Z (mm) of the printed membrane surface's points at cell-frame height
+    ``z`` (mm) and azimuth ``theta`` (rad), progress p.
+
+    The soil surface's height ``z = H g(Z / H0)``, ``g(zeta) = zeta - k zeta (1 - zeta)``, is
+    inverted exactly; ``OCCLUDER_NEWTON_STEPS`` fixed-point steps then move to the printed
+    surface (offset along the normal by the membrane thickness: under 0.02 mm in z).
+    """
+    s = deformation
+    k = s.axial_nonuniformity * p
+    hc = s.current_height(p)
+    z = np.asarray(z, float)
+    theta = np.asarray(theta, float)
+
+    def soil_inverse(zz: np.ndarray) -> np.ndarray:
+        u = np.clip(zz / hc, 0.0, 1.0)
+        return s.height * 2 * u / ((1 - k) + np.sqrt((1 - k) ** 2 + 4 * k * u))  # stable root
+
+    Z = soil_inverse(z)
+    for _ in range(OCCLUDER_NEWTON_STEPS):
+        dz = s.outer_surface(theta, Z, p)[0][:, 2] - s.inner_surface(theta, Z, p)[:, 2]
+        Z = soil_inverse(z - dz)
+    return Z
 
 
 def render_chunk(

@@ -42,6 +42,31 @@ VOLUME = Schema(
      "volumetric_strain": "float64"},
     ("frame",),
 )  # fmt: skip
+"""Specimen volume and strains per frame (the truth's ``truth/volume.parquet`` and the leading
+columns of the measured one): soil volume (mm^3), axial and volumetric strain (dimensionless,
+compression positive) relative to the reference frame."""
+VOLUME_RESULT = Schema(
+    "volume_result",
+    VOLUME.columns | {
+        "height_mm": "float64", "radial_strain": "float64", "volume_change_mm3": "float64",
+        "mesh_volume_mm3": "float64", "chordal_mm3": "float64", "membrane_mm3": "float64",
+        "volume_sigma_mm3": "float64", "measured_fraction": "float64", "filled_dots": "Int64",
+        "watertight": "boolean", "reference_frame": "Int64", "warning": "object", "reason": "object",
+    },
+    ("frame",),
+)  # fmt: skip
+"""The measured ``results/<test>/volume.parquet`` (``triaxtrack.volume.volume_series``): the
+:data:`VOLUME` columns, then ``height_mm`` (top face centre above the bottom face),
+``radial_strain = (volumetric - axial) / 2``, ``volume_change_mm3 = V - V0``, the volume's parts
+``mesh_volume_mm3, chordal_mm3, membrane_mm3``; ``volume_sigma_mm3`` the 1-sigma standard
+uncertainty of ``volume_mm3`` (mm^3: the measured dots' noise, the fill's leave-out error and the
+top face's height, in quadrature; NaN when the fill's part cannot be estimated);
+``measured_fraction`` the share (0-1) of the membrane's dots measured in the frame, each dot
+standing for the same design area (known for failed frames too); ``filled_dots`` the dots
+filled; ``watertight`` Open3D's check of the dot mesh; ``reference_frame`` the frame the strains
+are relative to (the first that succeeded); ``warning`` '' or why a measured frame deserves a
+look (many dots filled, unknown fill uncertainty, a later reference); ``reason`` '' or why the
+frame has no volume (its values NaN, the nullable ones <NA>)."""
 
 FRAME_MAP = Schema(
     "frame_map",
@@ -137,7 +162,7 @@ point), ``used`` whether it entered the solution, ``reason`` why not ('' when us
 TRACKS = Schema(
     "tracks",
     {"camera": "object", "frame": "int64", "id": "int64", "u_px": "float64", "v_px": "float64",
-     "area_px": "float64", "reason": "object"},
+     "area_px": "float64", "sigma_px": "float64", "reason": "object"},
     ("camera", "frame", "id"),
 )  # fmt: skip
 """One camera's targets followed through a chunk (``triaxtrack.track``): one row per target
@@ -145,7 +170,9 @@ labelled at the chunk's first recorded frame, per processed frame of the chunk (
 the chunk shares with the next one); ``u_px, v_px`` the distorted centroid (NaN where the target
 is not reported), ``area_px`` its blob's area, ``reason`` '' when reported, else why not
 ('edge', 'lost', 'merged', 'shape', 'jump', 'ambiguous', 'drift', 'unconfirmed',
-'disagrees', 'not_recorded': :mod:`triaxtrack.track`)."""
+'disagrees', 'not_recorded': :mod:`triaxtrack.track`; counts per camera and reason:
+``tracks.groupby(["camera", "reason"]).size()``); ``sigma_px`` the standard uncertainty of each
+coordinate of a reported centroid, from its window's pixel noise (NaN where not reported), pixels."""
 
 STRAINS = Schema(
     "strains",

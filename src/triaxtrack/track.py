@@ -5,21 +5,28 @@ from there each ID is carried forward without detecting or identifying the frame
 
 1. **Predict** each target from its recent motion (constant velocity; a target that was not
    reported in the previous frame moves with its neighbours, see 4).
-2. **Measure** it locally: in a small window around the prediction the dark blob is found by
-   the same rule as :func:`triaxtrack.detect.detect_blobs` (ink: darker than the local white
-   level by ``ink_fraction`` of it and by ``min_contrast``), within a disc of the dot's semi-major
-   axis plus one pixel that is re-centred on the blob (mean shift), and its contrast-weighted centroid
-   is taken over the blob grown by one pixel. The window is the search gate: the nearest
-   detection to the prediction is the blob the disc converges on.
+2. **Measure** it locally (:mod:`triaxtrack.window`): in a small window around the prediction
+   the window's own white level (a plane fitted to the ring of pixels around the dot) and pixel
+   noise (their robust standard deviation) are measured; ink is darker than the white level by
+   ``ink_fraction`` of it and by ``INK_NOISE_K`` times the noise (so a uniform change of light
+   changes nothing), found within a disc of the dot's semi-major axis plus ``disc_margin_px``
+   that is re-centred on the blob (mean shift); the contrast-weighted centroid is taken over
+   the blob grown by two pixels, with its standard uncertainty ``sigma_px`` propagated from the
+   pixel noise. The window is the search gate: the nearest detection to the prediction is the
+   blob the disc converges on.
 3. **Check**, and drop for this frame with a reason, never swap:
 
    * ``edge``: the window leaves the image;
-   * ``lost``: no ink in the disc (occluded, out of view);
+   * ``lost``: no ink in the disc (occluded, out of view; or a window too dark to show a dot);
    * ``merged``: the blob runs on beyond its disc (it touches another dark feature);
-   * ``shape``: its mass (the summed contrast: the dot's area times its darkness, without the
-     whole-pixel jumps of a thresholded area) changed by more than ``mass_step`` since it was
-     last seen, or by more than ``mass_change`` since the chunk's first frame (partly hidden,
-     or merged with another dark feature);
+   * ``shape``: its normalised mass (the summed contrast over the white level: the dot's area
+     times its darkness, without the whole-pixel jumps of a thresholded area, unchanged by a
+     uniform change of light) changed since it was last seen by more than the larger of
+     ``mass_step`` and ``MASS_NOISE_K`` standard uncertainties, or since the chunk's first frame
+     by more than the larger of ``mass_change`` and as many (partly hidden, or merged with
+     another dark feature). The uncertainty is the larger of the one propagated from the pixel
+     noise of the two windows and the camera's own robust scatter of that change over all its
+     targets in the frame (which holds what the window noise misses, such as compression);
    * ``jump``: the centroid is farther than ``gate`` (a fraction of the distance to the nearest
      other detection at the chunk's first frame) from the prediction;
    * ``ambiguous``: two targets converge to within ``min_separation`` of that distance (one
@@ -39,10 +46,14 @@ from there each ID is carried forward without detecting or identifying the frame
    of its neighbours are reported for the ``drift`` check to vouch for it (else
    ``unconfirmed``): a position extrapolated blind can sit on the next dot when the motion is
    fast (in a frame the camera did not record, nothing is measured and the prediction simply
-   moves on).
+   moves on). A blank frame in steady tracking (``BLANK_SHARE`` of the targets ``lost``, after
+   ``STEADY_FRAMES`` frames with ``STEADY_SHARE`` reported: a glitched or black picture) is
+   treated like a frame not recorded for the vouching, so every target comes back the next
+   frame; a frame whose windows catch ink in the wrong places (fast motion) is not excused.
 
-Pixels are distorted image coordinates in OpenCV's convention (the centre of the top-left pixel
-is (0, 0)); frames are test frames (``triaxtrack.frames``).
+Velocities are per frame, also across frames not recorded. Pixels are distorted image
+coordinates in OpenCV's convention (the centre of the top-left pixel is (0, 0)); frames are
+test frames (``triaxtrack.frames``).
 """
 
 from __future__ import annotations
@@ -55,11 +66,17 @@ import pandas as pd
 from scipy.spatial import cKDTree
 
 from triaxtrack.detect import DetectParams
+from triaxtrack.window import WindowMeasure, measure_windows
 
 NEIGHBOURS = 12  # same-kind neighbours whose motion predicts a target's (local affine flow)
 MIN_FLOW_NEIGHBOURS = 4  # fewer reported neighbours: no flow check, velocity prediction
-MEAN_SHIFT_STEPS = 3  # re-centring steps of the disc; motion left after prediction is sub-pixel
-WHITE_PERCENTILE = 80.0  # the window's white level (dots cover well under 20 % of a window)
+MASS_NOISE_K = 4.0  # a mass change within 4 standard uncertainties is noise (two-sided 6e-5 a
+# check: a noisy small dot is not dropped for noise alone; a half-hidden one loses ~50 % of its mass)
+MIN_SCATTER_TARGETS = 20  # targets needed for the camera's own scatter of mass changes
+MAD_TO_SIGMA = 1.4826  # median absolute deviation to standard deviation (normal noise)
+BLANK_SHARE = 0.9  # a frame in which at least this share of the targets is 'lost' is blank ...
+STEADY_SHARE = 0.9  # ... and excused if at least this share was reported in the frames before it
+STEADY_FRAMES = 2  # ... for this many frames in a row (so that their velocity is measured)
 FAR_NEIGHBOURS = 4.0  # x spacing: how far vouching neighbours are sought for a target found again
 CONFIRM_PASSES = 5  # rounds in which targets found again are confirmed by their neighbours
 VELOCITY_SMOOTHING = 0.5  # weight of the previous velocity (one noisy or biased frame moves it less)
@@ -81,8 +98,7 @@ class TrackingConfig:
     max_flow_residual_px: float = 0.5  # max departure from the neighbours' affine motion, pixels
     first_agreement_px: float = 0.25  # at the labelled frame: max distance to the detection's centroid
     disc_margin_px: float = 1.0  # the blob's disc: its semi-major axis plus this, pixels
-    min_contrast: float = DetectParams.min_contrast  # grey levels, as detection
-    ink_fraction: float = DetectParams.ink_fraction  # as detection
+    ink_fraction: float = DetectParams.ink_fraction  # ink: darker than ink_fraction x the white level
 
     @staticmethod
     def from_dict(d: dict | None) -> TrackingConfig:
@@ -114,8 +130,10 @@ class _State:
 
     ids: np.ndarray
     ref_uv: np.ndarray  # (n, 2) centroid at the chunk's first frame (NaN: not measured there)
-    ref_mass: np.ndarray  # (n,) blob mass there (summed contrast)
-    last_mass: np.ndarray  # (n,) blob mass when last reported
+    ref_mass: np.ndarray  # (n,) normalised blob mass there (summed contrast / white level)
+    ref_smass: np.ndarray  # (n,) its standard uncertainty
+    last_mass: np.ndarray  # (n,) normalised blob mass when last reported
+    last_smass: np.ndarray  # (n,) its standard uncertainty
     radius: np.ndarray  # (n,) disc radius, pixels
     spacing: np.ndarray  # (n,) distance to the nearest other detection at the first frame
     neighbours: np.ndarray  # (n, NEIGHBOURS) same-kind neighbours (index n: none)
@@ -123,6 +141,8 @@ class _State:
     last_uv: np.ndarray  # (n, 2) where it was last reported
     last_vel: np.ndarray  # (n, 2) its velocity then, pixels per frame
     blind: np.ndarray  # (n,) frames measured and not reported since it was last reported
+    since: np.ndarray  # (n,) frames (of any kind) from when it was last reported to this one
+    steady: int = 0  # frames in a row in which STEADY_SHARE of the targets were reported
 
 
 def _neighbours(uv: np.ndarray, kinds: np.ndarray) -> np.ndarray:
@@ -155,103 +175,31 @@ def _init_state(labels: pd.DataFrame, cfg: TrackingConfig) -> _State:
     radius = np.sqrt(area / (np.pi * roundness)) + cfg.disc_margin_px  # semi-major axis + margin
     n = len(ids)
     return _State(
-        ids=ids, ref_uv=np.full((n, 2), np.nan), ref_mass=np.full(n, np.nan),
-        last_mass=np.full(n, np.nan), radius=radius,
+        ids=ids, ref_uv=np.full((n, 2), np.nan), ref_mass=np.full(n, np.nan), ref_smass=np.zeros(n),
+        last_mass=np.full(n, np.nan), last_smass=np.zeros(n), radius=radius,
         spacing=spacing, neighbours=_neighbours(uv, target_kind(ids)), pred=uv.copy(), last_uv=uv.copy(),
-        last_vel=np.zeros((n, 2)), blind=np.zeros(n, np.int64),
+        last_vel=np.zeros((n, 2)), blind=np.zeros(n, np.int64), since=np.ones(n, np.int64),
     )  # fmt: skip
 
 
-def _dilate(mask: np.ndarray) -> np.ndarray:
-    """3x3 dilation of a stack of (m, h, w) masks (separable: rows, then columns)."""
-    out = mask.copy()
-    out[:, 1:] |= mask[:, :-1]
-    out[:, :-1] |= mask[:, 1:]
-    rows = out.copy()
-    out[:, :, 1:] |= rows[:, :, :-1]
-    out[:, :, :-1] |= rows[:, :, 1:]
-    return out
-
-
-def _dist2(xs: np.ndarray, ys: np.ndarray, c: np.ndarray) -> np.ndarray:
-    """(m, h, w) squared distances of window pixels from (m, 2) window-relative centres."""
-    return (xs - c[:, 0, None, None]) ** 2 + (ys - c[:, 1, None, None]) ** 2
+def measure_targets(
+    gray: np.ndarray, uv_px: np.ndarray, radius_px: np.ndarray, cfg: TrackingConfig | None = None
+) -> WindowMeasure:
+    """The dark blobs nearest (N, 2) predicted pixel positions, each measured against its own
+    window's white level and noise (:func:`triaxtrack.window.measure_windows`): centroid, ink
+    area, normalised mass and their uncertainties, and '' or 'edge', 'lost', 'merged'."""
+    cfg = cfg or TrackingConfig()
+    return measure_windows(gray, uv_px, radius_px, cfg.ink_fraction, cfg.disc_margin_px)
 
 
 def measure_blobs(
     gray: np.ndarray, uv_px: np.ndarray, radius_px: np.ndarray, cfg: TrackingConfig | None = None
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Local centroids of the dark blobs nearest (N, 2) predicted pixel positions.
-
-    ``radius_px`` (N,): the disc that holds a blob (its semi-major axis plus a margin). In a
-    window around each prediction the ink (as detection) near the prediction is re-centred on
-    by mean shift; the blob is then the 8-connected ink grown from its centre within the disc,
-    and its centroid is contrast-weighted over the blob grown by one pixel, other ink excluded
-    (as :func:`triaxtrack.detect.detect_blobs`). Returns ``(uv (N, 2), area (N,), reason (N,)
-    object)``: the centroid, the blob's ink area in pixels, its mass (the summed contrast
-    weights, grey levels x pixels: unlike the area it does not jump by whole pixels), and '' or
-    'edge' (the window leaves
-    the image), 'lost' (no ink at the centre), 'merged' (the blob runs on beyond its disc);
-    uv is NaN unless the reason is ''.
-    """
-    cfg = cfg or TrackingConfig()
-    g = np.asarray(gray)
-    H, W = g.shape
-    uv_px = np.asarray(uv_px, np.float64).reshape(-1, 2)
-    n = len(uv_px)
-    out = np.full((n, 2), np.nan)
-    area = np.zeros(n)
-    mass = np.zeros(n)
-    reason = np.full(n, "", dtype=object)
-    finite = np.isfinite(uv_px).all(axis=1)
-    reason[~finite] = "lost"
-    half = np.where(finite, np.ceil(np.nan_to_num(radius_px)).astype(np.int64) + 2, 0)
-    for h in np.unique(half[finite]):
-        sel = np.nonzero(finite & (half == h))[0]
-        cu = np.rint(uv_px[sel, 0]).astype(np.int64)
-        cv = np.rint(uv_px[sel, 1]).astype(np.int64)
-        inside = (cu - h >= 0) & (cv - h >= 0) & (cu + h < W) & (cv + h < H)
-        reason[sel[~inside]] = "edge"
-        sel, cu, cv = sel[inside], cu[inside], cv[inside]
-        if len(sel) == 0:
-            continue
-        m = len(sel)
-        off = np.arange(-h, h + 1)
-        patch = g[(cv[:, None, None] + off[None, :, None]), (cu[:, None, None] + off[None, None, :])]
-        patch = patch.astype(np.float32)
-        white = np.percentile(patch.reshape(m, -1), WHITE_PERCENTILE, axis=1).astype(np.float32)
-        contrast = white[:, None, None] - patch
-        ink = contrast > np.maximum(cfg.min_contrast, cfg.ink_fraction * white)[:, None, None]
-        wts = np.clip(contrast, 0, None)
-        xs = off[None, None, :].astype(np.float64)
-        ys = off[None, :, None].astype(np.float64)
-        c = uv_px[sel] - np.c_[cu, cv]  # prediction relative to the window centre
-
-        core = (radius_px[sel] - cfg.disc_margin_px)[:, None, None] ** 2
-        for _ in range(MEAN_SHIFT_STEPS):  # ink within the blob's own size of the estimate
-            w = wts * (ink & (_dist2(xs, ys, c) <= core))
-            s = w.sum(axis=(1, 2))
-            ok = s > 0
-            c = np.where(ok[:, None], np.c_[(w * xs).sum(axis=(1, 2)), (w * ys).sum(axis=(1, 2))]
-                         / np.where(ok, s, 1)[:, None], c)  # fmt: skip
-        disc = _dist2(xs, ys, c) <= (radius_px[sel] ** 2)[:, None, None]
-        blob = ink & (_dist2(xs, ys, c) <= 2.0)  # the ink at the centre ...
-        for _ in range(int(h) + 1):  # ... grown through connected ink within the disc
-            blob = _dilate(blob) & ink & disc
-        grown = _dilate(blob)
-        runs_on = (grown & ink & ~disc).any(axis=(1, 2))
-        grown &= ~(ink & ~blob)
-        w = wts * grown
-        s = w.sum(axis=(1, 2))
-        npx = blob.sum(axis=(1, 2))
-        r = np.where(npx == 0, "lost", np.where(runs_on, "merged", ""))
-        reason[sel] = r
-        keep = r == ""
-        cen = np.c_[(w * xs).sum(axis=(1, 2)), (w * ys).sum(axis=(1, 2))] / np.where(s > 0, s, 1)[:, None]
-        out[sel[keep]] = cen[keep] + np.c_[cu, cv][keep]
-        area[sel] = npx
-        mass[sel] = s
-    return out, area, mass, reason
+    """:func:`measure_targets` as ``(uv (N, 2), area (N,), mass (N,), reason (N,) object)``:
+    the centroid (NaN unless the reason is ''), the blob's ink area in pixels, its mass in grey
+    levels x pixels (the summed contrast: the normalised mass times the window's white level)."""
+    m = measure_targets(gray, uv_px, radius_px, cfg)
+    return m.uv, m.area, np.nan_to_num(m.mass * m.white), m.reason
 
 
 def _affine_flow(
@@ -296,27 +244,52 @@ def _vouchers(state: _State, vouch: np.ndarray, which: np.ndarray) -> np.ndarray
     return out
 
 
+def _scatter(rel: np.ndarray, use: np.ndarray) -> float:
+    """Robust standard deviation (1.4826 x MAD) of the relative mass changes ``rel`` of the
+    targets ``use`` (0 when fewer than ``MIN_SCATTER_TARGETS``)."""
+    r = rel[use & np.isfinite(rel)]
+    if len(r) < MIN_SCATTER_TARGETS:
+        return 0.0
+    return float(MAD_TO_SIGMA * np.median(np.abs(r - np.median(r))))
+
+
+def _mass_ok(mass, smass, ref, sref, fraction: float, scatter: float) -> np.ndarray:
+    """Whether normalised masses agree with reference ones: a relative change within the larger
+    of ``fraction`` and ``MASS_NOISE_K`` x its standard uncertainty: the larger of the one
+    propagated from the pixel noise of both and the ``scatter`` of the camera's targets."""
+    sigma = np.maximum(np.hypot(smass, sref) / ref, scatter)
+    return np.abs(mass / ref - 1) <= np.maximum(fraction, MASS_NOISE_K * sigma)
+
+
 def _step(state: _State, gray: np.ndarray | None, cfg: TrackingConfig, first: bool) -> tuple:
-    """Track one frame: returns (uv (n, 2), area (n,), reason (n,)) and advances the state."""
+    """Track one frame: returns (uv (n, 2), area (n,), sigma_px (n,), reason (n,)) and advances
+    the state."""
     n = len(state.ids)
     if gray is None:  # no picture: extrapolate; not a failed measurement, so blind stays as it is
         state.pred = state.pred + state.last_vel
-        return np.full((n, 2), np.nan), np.zeros(n), np.full(n, "not_recorded", dtype=object)
+        state.since = state.since + 1
+        nan = np.full(n, np.nan)
+        return np.c_[nan, nan], np.zeros(n), nan, np.full(n, "not_recorded", dtype=object)
     pred = state.pred
     # targets left out of the chunk at its first frame are not measured again (NaN: 'lost')
     probe = pred if first else np.where(np.isfinite(state.ref_mass)[:, None], pred, np.nan)
-    uv, area, mass, reason = measure_blobs(gray, probe, state.radius, cfg)
+    meas = measure_targets(gray, probe, state.radius, cfg)
+    uv, mass, smass, reason = meas.uv, meas.mass, meas.sigma_mass, meas.reason.copy()
     if first:  # the tracker's centroid must agree with the detection's, or the target is left out
         agree = (reason == "") & (np.linalg.norm(uv - pred, axis=1) <= cfg.first_agreement_px)
         reason[(reason == "") & ~agree] = "disagrees"
         state.ref_uv = np.where(agree[:, None], uv, np.nan)
         state.ref_mass = np.where(agree, mass, np.nan)
-        state.last_mass = state.ref_mass
+        state.ref_smass = np.where(agree, smass, 0.0)
+        state.last_mass, state.last_smass = state.ref_mass, state.ref_smass
     reason[~np.isfinite(state.ref_mass)] = "disagrees"
     measured = reason == ""
-    change = np.abs(mass / state.ref_mass - 1)
-    step = np.where(state.blind == 0, np.abs(mass / state.last_mass - 1), 0.0)  # since the last frame
-    bad_shape = measured & ~((change <= cfg.mass_change) & (step <= cfg.mass_step))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        fresh = measured & (state.blind == 0)
+        scatter = [_scatter(mass / m - 1, fresh) for m in (state.ref_mass, state.last_mass)]
+        same = _mass_ok(mass, smass, state.ref_mass, state.ref_smass, cfg.mass_change, scatter[0])
+        step = _mass_ok(mass, smass, state.last_mass, state.last_smass, cfg.mass_step, scatter[1])
+    bad_shape = measured & ~(same & (step | (state.blind > 0)))  # step: since the last frame
     reason[bad_shape] = "shape"
     jump = measured & (np.linalg.norm(uv - pred, axis=1) > cfg.gate * state.spacing)
     reason[jump & (reason == "")] = "jump"
@@ -326,10 +299,11 @@ def _step(state: _State, gray: np.ndarray | None, cfg: TrackingConfig, first: bo
         close = d[:, 1] < cfg.min_separation * state.spacing[cand]
         reason[cand[close]] = "ambiguous"
         reason[cand[nearest[close, 1]]] = "ambiguous"
-    # The flow check. Only targets reported in the previous frame too vouch for their
-    # neighbours at first: targets found again must not confirm one another (a whole region can
-    # lock one dot over at once); each one that passes then vouches in turn, so confirmation
-    # spreads from the steadily tracked targets into a region that reappears.
+    # The flow check. Only targets reported in the previous frame (or before a blank one, see
+    # below) vouch for their neighbours at first: targets found again must not confirm
+    # one another (a whole region can lock one dot over at once); each one that passes then
+    # vouches in turn, so confirmation spreads from the steadily tracked targets into a region
+    # that reappears.
     ok = reason == ""
     disp = uv - state.ref_uv
     vouch = ok & (state.blind == 0)
@@ -360,22 +334,36 @@ def _step(state: _State, gray: np.ndarray | None, cfg: TrackingConfig, first: bo
     reason[drift] = "drift"
     reason[pending] = "unconfirmed"  # found again, but no reported neighbours can vouch for it
     ok = reason == ""
+    # A blank frame (a glitched, blanked or over-exposed picture: no ink where almost every
+    # target should be) in steady tracking is a failure of the picture, not of each target:
+    # like a frame not recorded it does not count against them, so those reported before it
+    # still vouch after it. A frame whose windows catch ink in the wrong places is not blank:
+    # its predictions may be wrong, and blind extrapolation would carry them on.
+    live = max(np.isfinite(state.ref_mass).sum(), 1)
+    excused = (reason == "lost").sum() >= BLANK_SHARE * live and state.steady >= STEADY_FRAMES
+    state.steady = state.steady + 1 if ok.sum() >= STEADY_SHARE * live else 0
     steady = ok & (state.blind == 0)
-    vel = VELOCITY_SMOOTHING * state.last_vel + (1 - VELOCITY_SMOOTHING) * (uv - state.last_uv)
+    moved = (uv - state.last_uv) / state.since[:, None]  # per frame since it was last reported
+    vel = VELOCITY_SMOOTHING * state.last_vel + (1 - VELOCITY_SMOOTHING) * moved
     state.last_vel = np.where(steady[:, None], vel, state.last_vel)
     state.last_uv = np.where(ok[:, None], uv, state.last_uv)
     state.last_mass = np.where(ok, mass, state.last_mass)
-    state.blind = np.where(ok, 0, state.blind + 1)
+    state.last_smass = np.where(ok, smass, state.last_smass)
+    state.blind = np.where(ok, 0, state.blind if excused else state.blind + 1)
+    state.since = np.where(ok, 1, state.since + 1)
     if first:
         state.last_vel = np.zeros((n, 2))
     # next frame: constant velocity; a dropped target moves with its neighbours, or else blind
-    blind_pred = state.last_uv + state.last_vel * (state.blind + 1)[:, None]
+    blind_pred = state.last_uv + state.last_vel * state.since[:, None]
     virtual = np.where(valid[:, None], state.ref_uv + flow, blind_pred)
     virtual = np.where(np.isfinite(virtual), virtual, blind_pred)
+    if excused:  # as in a frame not recorded: the prediction moves on
+        virtual = pred + state.last_vel
     # found but not yet confirmed: where it was found is the best guess
     virtual = np.where((reason == "unconfirmed")[:, None], uv, virtual)
     state.pred = np.where(ok[:, None], uv + state.last_vel, virtual)
-    return np.where(ok[:, None], uv, np.nan), area, reason
+    sigma = np.where(ok, meas.sigma_px, np.nan)
+    return np.where(ok[:, None], uv, np.nan), meas.area, sigma, reason
 
 
 def track_frames(
@@ -391,7 +379,8 @@ def track_frames(
 
     Returns a ``TRACKS`` table: one row per labelled target per frame in ``report`` (the
     labels' frame included, re-measured by the tracker so that every frame has the same
-    centroid estimator).
+    centroid estimator), with the extra column ``sigma_px``: the standard uncertainty of each
+    coordinate of a reported centroid from the pixel noise (NaN where not reported), pixels.
     """
     cfg = cfg or TrackingConfig()
     state = _init_state(labels, cfg)
@@ -400,14 +389,15 @@ def track_frames(
     for i, (k, gray) in enumerate(frames):
         if i == 0 and gray is None:
             raise ValueError(f"{camera}: no picture of the labelled frame {k}")
-        uv, area, reason = _step(state, gray, cfg, first=i == 0)
+        uv, area, sigma, reason = _step(state, gray, cfg, first=i == 0)
         if int(k) in report:
             parts.append(pd.DataFrame({
                 "camera": camera, "frame": int(k), "id": state.ids, "u_px": uv[:, 0], "v_px": uv[:, 1],
-                "area_px": area, "reason": reason.astype(str),
+                "area_px": area, "reason": reason.astype(str), "sigma_px": sigma,
             }))  # fmt: skip
     if not parts:
-        return pd.DataFrame({c: [] for c in ("camera", "frame", "id", "u_px", "v_px", "area_px", "reason")})
+        cols = ("camera", "frame", "id", "u_px", "v_px", "area_px", "reason", "sigma_px")
+        return pd.DataFrame({c: [] for c in cols})
     return pd.concat(parts, ignore_index=True)
 
 

@@ -1,0 +1,186 @@
+"""Volume and strains of every frame of a test, and the PLY meshes of a few (mm, mm^3)."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from triaxtrack.volume.cap import TopCap, top_cap
+from triaxtrack.volume.grid import (
+    MAX_MISSING_SHARE,
+    WARN_MISSING_SHARE,
+    FaceEnds,
+    MembraneGrid,
+    face_ends,
+    membrane_grid,
+)
+from triaxtrack.volume.mesh import (
+    REFINE_LEVELS,
+    check_mesh,
+    closed_mesh,
+    membrane_thickness,
+    specimen_volume,
+    write_ply,
+)
+from triaxtrack.volume.strains import strain_field
+from triaxtrack.volume.uncertainty import volume_uncertainty
+
+FAILURES = (ValueError, np.linalg.LinAlgError)  # what makes one frame fail (NaN and a reason)
+COLUMNS = [
+    "frame", "time_s", "volume_mm3", "axial_strain", "volumetric_strain", "height_mm", "radial_strain",
+    "volume_change_mm3", "mesh_volume_mm3", "chordal_mm3", "membrane_mm3", "volume_sigma_mm3",
+    "measured_fraction", "filled_dots", "watertight", "reference_frame", "warning", "reason",
+]  # fmt: skip
+FLOAT_COLUMNS = COLUMNS[1:13]
+
+
+def measured_share(points: pd.DataFrame, table: pd.DataFrame) -> float:
+    """Share of the kit's membrane dots with a finite position in ``points`` (one frame)."""
+    ids = table.loc[table["surface"] == "membrane", "id"]
+    ok = points[points["id"].isin(ids)].dropna(subset=["x_mm", "y_mm", "z_mm"])
+    return float(ok["id"].nunique() / max(len(ids), 1))
+
+
+def frame_grid(
+    points: pd.DataFrame, table: pd.DataFrame, design: dict, t0: float, max_missing_share: float
+) -> tuple[MembraneGrid, TopCap, FaceEnds]:
+    """One frame's top cap, face rings and filled membrane grid (ValueError when it fails)."""
+    cap = top_cap(points, table, design)
+    ends = face_ends(design, cap, t0)
+    return membrane_grid(points, table, max_missing_share, ends), cap, ends
+
+
+def volume_series(
+    points: pd.DataFrame,
+    table: pd.DataFrame,
+    design: dict,
+    t0: float | None = None,
+    max_missing_share: float = MAX_MISSING_SHARE,
+    levels: tuple[int, int] = REFINE_LEVELS,
+    check: bool = True,
+    thickness_model: str = "area",
+    warn_missing_share: float = WARN_MISSING_SHARE,
+) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """Volume and membrane strains of every frame of ``points`` (columns ``frame, time_s, id,
+    x_mm, y_mm, z_mm``, optionally ``sigma_mm``; mm, cell frame).
+
+    The reference is the first frame that succeeds (``reference_frame``; normally the first
+    frame): its height H0 and volume V0, and its dot grid, where the membrane has the thickness
+    ``t0`` (mm; default the design's ``specimen.membrane_thickness``). Returns ``(volume,
+    strains)``: ``volume`` has the :data:`~triaxtrack.tables.VOLUME_RESULT` columns
+    (``axial_strain = (H0 - H) / H0``, ``volumetric_strain = (V0 - V) / V0``, compression
+    positive, ``radial_strain = (volumetric - axial) / 2``, ``volume_change_mm3 = V - V0``,
+    ``volume_sigma_mm3`` the 1-sigma standard uncertainty of ``volume_mm3``
+    (:mod:`triaxtrack.volume.uncertainty`), ``measured_fraction`` the share of membrane dots
+    measured); ``strains`` has the :data:`~triaxtrack.tables.STRAINS` columns for every frame
+    that succeeded (filled dots included). Missing dots are filled (:func:`membrane_grid`); a
+    frame with more than ``warn_missing_share`` missing gets a ``warning``; one that fails
+    (more than ``max_missing_share`` missing, fewer than 3 cap targets, ...) gets NaN values,
+    ``filled_dots``/``watertight`` <NA> and its ``reason``. ``check`` runs :func:`check_mesh`
+    on each frame's dot mesh (``watertight``); ``thickness_model`` is passed to
+    :func:`membrane_thickness`. Never raises for a frame's data.
+    """
+    if t0 is None:
+        t0 = float(design["specimen"]["membrane_thickness"])
+    frames = sorted(points["frame"].unique())
+    rows: list[dict] = []
+    strain_parts: list[pd.DataFrame] = []
+    ref: tuple[int, MembraneGrid, float, float] | None = None
+    for frame in frames:
+        pf = points[points["frame"] == frame]
+        time_s = float(pf["time_s"].iloc[0])
+        share = measured_share(pf, table)
+        row = {"frame": int(frame), "time_s": time_s, "measured_fraction": share}
+        try:
+            grid, cap, ends = frame_grid(pf, table, design, t0, max_missing_share)
+            grid0 = grid if ref is None else ref[1]
+            thickness = membrane_thickness(grid, grid0, t0, model=thickness_model)
+            res = specimen_volume(grid, cap, thickness, levels)
+            unc = volume_uncertainty(grid, ends, cap, res.volume_mm3)
+            watertight = check_mesh(*closed_mesh(grid, cap))["watertight"] if check else pd.NA
+            if ref is None:
+                ref = (int(frame), grid, res.height_mm, res.volume_mm3)
+            strains = strain_field(grid, ref[1])
+        except FAILURES as err:
+            rows.append(row | {"reason": str(err)})
+            continue
+        k0, _, h0, v0 = ref
+        warnings = []
+        if 1 - grid.measured_fraction > warn_missing_share:
+            warnings.append(f"{1 - grid.measured_fraction:.1%} of the membrane dots filled")
+        if not np.isfinite(unc.fill_mm3):
+            warnings.append("the fill's uncertainty is unknown (no leave-out place)")
+        if k0 != frames[0]:
+            warnings.append(f"strains relative to frame {k0}: the first frame {frames[0]} failed")
+        axial = (h0 - res.height_mm) / h0
+        volumetric = (v0 - res.volume_mm3) / v0
+        rows.append(row | {
+            "volume_mm3": res.volume_mm3, "axial_strain": axial, "volumetric_strain": volumetric,
+            "height_mm": res.height_mm, "radial_strain": (volumetric - axial) / 2,
+            "volume_change_mm3": res.volume_mm3 - v0, "mesh_volume_mm3": res.mesh_volume_mm3,
+            "chordal_mm3": res.chordal_mm3, "membrane_mm3": res.membrane_mm3,
+            "volume_sigma_mm3": unc.sigma_mm3, "filled_dots": res.filled_dots, "watertight": watertight,
+            "reference_frame": k0, "warning": "; ".join(warnings), "reason": "",
+        })  # fmt: skip
+        strain_parts.append(strains.assign(frame=int(frame), time_s=time_s))
+    vol = pd.DataFrame(rows).reindex(columns=COLUMNS)
+    vol["frame"] = vol["frame"].astype(np.int64)
+    for c in FLOAT_COLUMNS:
+        vol[c] = vol[c].astype(float)
+    vol["filled_dots"] = vol["filled_dots"].astype("Int64")
+    vol["watertight"] = vol["watertight"].astype("boolean")
+    vol["reference_frame"] = vol["reference_frame"].astype("Int64")
+    for c in ("warning", "reason"):
+        vol[c] = vol[c].fillna("").astype(object)
+    strain_cols = ["frame", "time_s", "row", "col", "theta_rad", "z_mm", "e_zz", "e_tt", "e_tz"]
+    strains = pd.concat(strain_parts, ignore_index=True)[strain_cols] if strain_parts else (
+        pd.DataFrame({c: pd.Series(dtype="int64" if c in ("frame", "row", "col") else "float64")
+                      for c in strain_cols})
+    )  # fmt: skip
+    return vol, strains.sort_values(["frame", "row", "col"], kind="stable").reset_index(drop=True)
+
+
+def volume_meshes(
+    points: pd.DataFrame,
+    table: pd.DataFrame,
+    design: dict,
+    frames: list[int],
+    out_dir: str | Path,
+    t0: float | None = None,
+    thickness_model: str = "area",
+    refine: int = 2,
+    max_missing_share: float = MAX_MISSING_SHARE,
+    reference_frame: int | None = None,
+) -> Iterator[tuple[int, Path | None, str]]:
+    """Write the soil surface (the membrane's inner surface closed by the pedestal faces, mm,
+    cell frame) of each of ``frames`` as ``out_dir/frame_<frame>.ply``; yields ``(frame, path,
+    '')``, or ``(frame, None, reason)`` for a frame that fails (nothing written). The reference
+    for the membrane's thinning is ``reference_frame`` (default: the first frame of ``points``
+    that succeeds); when none succeeds every frame is skipped with that reason."""
+    if t0 is None:
+        t0 = float(design["specimen"]["membrane_thickness"])
+    grid0, ref_error = None, "no frame of the test succeeds"
+    candidates = sorted(points["frame"].unique()) if reference_frame is None else [reference_frame]
+    for k in candidates:
+        try:
+            grid0 = frame_grid(points[points["frame"] == k], table, design, t0, max_missing_share)[0]
+            break
+        except FAILURES as err:
+            ref_error = f"reference frame {k} failed: {err}"
+    for frame in frames:
+        if grid0 is None:
+            yield int(frame), None, ref_error
+            continue
+        try:
+            grid, cap, _ = frame_grid(points[points["frame"] == frame], table, design, t0, max_missing_share)
+            thickness = membrane_thickness(grid, grid0, t0, model=thickness_model)
+            vertices, triangles = closed_mesh(grid, cap, refine, thickness, inner=True)
+        except FAILURES as err:
+            yield int(frame), None, str(err)
+            continue
+        path = Path(out_dir) / f"frame_{int(frame):06d}.ply"
+        write_ply(path, vertices, triangles)
+        yield int(frame), path, ""

@@ -1,0 +1,58 @@
+"""Noise and blur measured from a frame, and touching blurred dots cut apart (triaxtrack.detect)."""
+
+import cv2
+import numpy as np
+import pytest
+
+from triaxtrack.detect import detect_blobs
+from triaxtrack.image_quality import blur_sigma, noise_sigma
+
+WHITE, INK = 200.0, 40.0
+
+
+def _dots(centres, radius, shape=(160, 1280), blur=0.0, noise=0.0, seed=0, oversample=8):
+    """A white frame (1280 wide: the local background is measured over 16 px) with dark discs at ``centres`` ((N, 2) u, v pixels, OpenCV convention), each
+    of ``radius`` pixels, drawn with exact pixel coverage (oversampled), then blurred and noised."""
+    h, w = shape
+    s = oversample
+    big = np.full((h * s, w * s), WHITE, np.float32)
+    for u, v in centres:
+        cv2.circle(big, (int(round((u + 0.5) * s - 0.5)), int(round((v + 0.5) * s - 0.5))),
+                   int(round(radius * s)), INK, -1)  # fmt: skip
+    img = cv2.resize(big, (w, h), interpolation=cv2.INTER_AREA)
+    if blur > 0:
+        img = cv2.GaussianBlur(img, (0, 0), blur)
+    img = img + noise * np.random.default_rng(seed).standard_normal(img.shape)
+    return np.clip(np.round(img), 0, 255).astype(np.uint8)
+
+
+def test_noise_sigma_reads_white_noise_within_15_percent():
+    for sigma in (2.0, 4.0, 6.0):
+        img = _dots([(40.3, 50.6), (100.2, 60.1)], 6, noise=sigma, seed=int(sigma))
+        assert noise_sigma(img) == pytest.approx(sigma, rel=0.15)
+
+
+def test_blur_sigma_reads_the_lens_blur_from_large_dots():
+    centres = [(30 + 40 * i + 0.3 * i, 30 + 50 * j + 0.2 * j) for i in range(3) for j in range(2)]
+    sharp = blur_sigma(_dots(centres, 5), detect_blobs(_dots(centres, 5)))
+    assert sharp < 0.5
+    for blur in (1.0, 1.5):
+        img = _dots(centres, 5, blur=blur, noise=2.0)
+        assert blur_sigma(img, detect_blobs(img)) == pytest.approx(blur, abs=0.3)
+
+
+def test_touching_blurred_dots_are_cut_apart_near_their_centres():
+    # columns of dots 2.2 px radius, 6 px apart down a column: blurred by 1 px they touch
+    rng = np.random.default_rng(3)
+    centres = np.array([(20 + 12 * i + rng.uniform(), 14 + 6 * j + rng.uniform()) for i in range(10)
+                        for j in range(16)])  # fmt: skip
+    # large dots (radius 5) for the blur estimate
+    big = np.array([(20 + 30 * i + 0.4, 112.3) for i in range(5)])
+    img = _dots(np.r_[centres, big], 2.2, shape=(130, 1280), blur=1.0, noise=3.0)
+    img = np.minimum(img, _dots(big, 5, shape=(130, 1280), blur=1.0))
+    blobs = detect_blobs(img)
+    assert blobs.blur.iloc[0] > 0.5
+    uv = blobs[["u_px", "v_px"]].to_numpy()
+    d = np.linalg.norm(uv[None, :, :] - centres[:, None, :], axis=2).min(axis=1)
+    assert (d < 0.5).mean() >= 0.95  # found, one blob each, within half a pixel
+    assert blobs.split.any()
