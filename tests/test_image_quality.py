@@ -11,8 +11,9 @@ WHITE, INK = 200.0, 40.0
 
 
 def _dots(centres, radius, shape=(160, 1280), blur=0.0, noise=0.0, seed=0, oversample=8):
-    """A white frame (1280 wide: the local background is measured over 16 px) with dark discs at ``centres`` ((N, 2) u, v pixels, OpenCV convention), each
-    of ``radius`` pixels, drawn with exact pixel coverage (oversampled), then blurred and noised."""
+    """A white frame (1280 wide: the local background is measured over 16 px) with dark discs
+    at ``centres`` ((N, 2) u, v pixels, OpenCV convention), each of ``radius`` pixels, drawn
+    with exact pixel coverage (oversampled), then blurred and noised."""
     h, w = shape
     s = oversample
     big = np.full((h * s, w * s), WHITE, np.float32)

@@ -14,11 +14,13 @@ import pytest
 
 from triaxtrack.kit import design_points
 from triaxtrack.optics import Camera, cell_optics, project_air, project_water
+from triaxtrack.refractive_pose import PoseObservations, image_spread_px, min_spread_px, pose_camera
 from triaxtrack.score import rotation_angle_deg
 from triaxtrack.sfm import (
     SfmConfig,
     axis_frame,
     bundle_adjust,
+    cell_summary,
     fit_cylinder,
     reconstruct_cell,
     similarity_transform,
@@ -295,3 +297,107 @@ def test_a_wrong_water_label_is_dropped_and_only_its_point_moves(scene):
     np.testing.assert_allclose(
         pts.loc[others, ["x_mm", "y_mm", "z_mm"]], clean.loc[others, ["x_mm", "y_mm", "z_mm"]]
     )
+
+
+# ---------------------------------------------------------------- cameras posed through the wall
+
+
+def _wall_and_water(scene):
+    """The design of the cell-wall targets and of the targets in the water (with their kind)."""
+    table, points = scene["table"], scene["points"]
+    wall = (table["surface"] == "cell_outer").to_numpy()
+    return points[wall], points[~wall].assign(kind=table.loc[~wall, "surface"].to_numpy())
+
+
+def _check_poses(rec, truth: dict) -> None:
+    for name, cam in rec.cameras.items():
+        assert np.linalg.norm(cam.center - truth[name].center) < 0.5, name
+        assert rotation_angle_deg(cam.R, truth[name].R) < 0.05, name
+
+
+def test_a_camera_without_wall_targets_is_posed_through_the_wall(scene):
+    wall, water = _wall_and_water(scene)
+    labels = scene["labels"]
+    labels = labels[~((labels["camera"] == "cam05") & labels["id"].isin(wall["id"]))]
+    rec = reconstruct_cell(scene["intrinsics"], labels, wall, SfmConfig(), water=water, cell=scene["cell"])
+    assert not rec.dropped and not rec.nominal and len(rec.cameras) == len(scene["cameras"])
+    assert rec.posed_from["cam05"]["pose_from"] == "water"
+    assert rec.posed_from["cam05"]["rms_px"] < 2 * NOISE_PX
+    assert rec.posed_from["cam04"]["pose_from"] == "cell_wall"
+    _check_poses(rec, scene["cameras"])
+
+
+@pytest.fixture(scope="module")
+def close_ring(design, table):
+    """Three cameras of a closer ring (radius 300 mm) that label no cell-wall target at all."""
+    cfg = SimulationConfig(
+        cameras=13, camera_radius_mm=300.0, focal_factor=0.677, camera_height_mm=71.0, seed=5
+    )
+    cameras = make_cameras(cfg)[:3]
+    points = design_points(design, table)
+    cell = cell_optics(design)
+    labels = _observations(cameras, points, table, cell, np.random.default_rng(11))
+    wall = table.loc[table["surface"] == "cell_outer", "id"]
+    intrinsics = {
+        c.name: Camera(c.name, c.width, c.height, c.K, c.dist, np.eye(3), np.zeros(3)) for c in cameras
+    }
+    return {"cameras": {c.name: c for c in cameras}, "intrinsics": intrinsics, "points": points, "cell": cell,
+            "labels": labels[~labels["id"].isin(wall)], "table": table}  # fmt: skip
+
+
+def test_no_camera_sees_the_wall_the_nominal_cell_poses_them(close_ring):
+    wall, water = _wall_and_water(close_ring)
+    rec = reconstruct_cell(
+        close_ring["intrinsics"],
+        close_ring["labels"],
+        wall,
+        SfmConfig(),
+        water=water,
+        cell=close_ring["cell"],
+    )
+    assert rec.nominal and not rec.dropped and len(rec.cameras) == 3
+    assert {v["pose_from"] for v in rec.posed_from.values()} == {"water"}
+    assert rec.cylinder.radius == close_ring["cell"].outer_radius
+    _check_poses(rec, close_ring["cameras"])
+    summary = cell_summary(rec)
+    assert summary["cell"]["source"] == "nominal" and summary["cameras_posed"]["cam01"]["targets"] >= 12
+
+
+def test_a_camera_that_cannot_be_posed_is_left_out_with_the_reason(close_ring):
+    wall, water = _wall_and_water(close_ring)
+    labels = close_ring["labels"]
+    few = labels[(labels["camera"] != "cam03") | labels["id"].isin(labels["id"].unique()[:5])]
+    rec = reconstruct_cell(
+        close_ring["intrinsics"], few, wall, SfmConfig(), water=water, cell=close_ring["cell"]
+    )
+    assert sorted(rec.cameras) == ["cam01", "cam02"]
+    assert "fewer than 12" in rec.dropped["cam03"]
+    _check_poses(rec, close_ring["cameras"])
+
+
+def test_fewer_than_two_posed_is_an_error_naming_each_camera_and_its_labels(close_ring):
+    wall, water = _wall_and_water(close_ring)
+    labels = close_ring["labels"]
+    bottom = water.loc[water["kind"] == "pedestal_bottom", "id"]
+    some = labels[(labels["camera"] == "cam01") | ((labels["camera"] == "cam02") & labels["id"].isin(bottom))]
+    with pytest.raises(ValueError, match="only 1 camera") as err:
+        reconstruct_cell(
+            close_ring["intrinsics"], some, wall, SfmConfig(), water=water, cell=close_ring["cell"]
+        )
+    message = str(err.value)
+    assert "cam02: 0 cell-wall" in message and "pedestal_bottom" in message and "cam03: nothing" in message
+
+
+def test_clumped_targets_do_not_pose_a_camera(close_ring):
+    cam = close_ring["cameras"]["cam01"]
+    assert image_spread_px(np.c_[np.linspace(0, 600, 20), np.full(20, 300.0)]) < min_spread_px(cam)
+    labels = close_ring["labels"]
+    obs = labels[labels["camera"] == "cam01"]
+    uv = obs[["u_px", "v_px"]].to_numpy()
+    near = obs[np.hypot(*(uv - uv.mean(axis=0)).T) < 10]  # a clump of targets ~10 px across
+    xyz = close_ring["points"].set_index("id").loc[near["id"], ["x_mm", "y_mm", "z_mm"]].to_numpy()
+    seen = PoseObservations(
+        near["id"].to_numpy(), xyz, near[["u_px", "v_px"]].to_numpy(), np.ones(len(near), bool)
+    )
+    out = pose_camera(close_ring["intrinsics"]["cam01"], seen, close_ring["cell"], 12, 2.0)
+    assert isinstance(out, str)

@@ -12,6 +12,7 @@ from triaxtrack.report import (
     MEMBRANE_COLS,
     MEMBRANE_FIRST_ID,
     MEMBRANE_ROWS,
+    PALETTE,
     REASON_COLOURS,
     REPORTED,
     Series,
@@ -278,6 +279,56 @@ def test_tracking_plot(tracks):
     all_found = tracks.assign(reason="")
     _drawn(tracking_plot(all_found))
     _drawn(tracking_plot(tracks.iloc[:0]))
+
+
+def test_camera_quality_and_plot(tracks):
+    """Per camera: targets labelled, tracked share (frames not recorded left out) and sigma."""
+    from triaxtrack.camera_report import camera_quality, camera_quality_plot
+
+    noisy = tracks.copy()
+    cam02 = (noisy["camera"] == "cam02") & (noisy["reason"] == "")
+    noisy.loc[cam02, "sigma_px"] = np.linspace(0.1, 0.3, int(cam02.sum()))  # poorer footage
+    labels = pd.DataFrame({"camera": ["cam01"] * 3 + ["cam02"] * 2, "frame": [0, 0, 3, 0, 0],
+                           "id": [1001, 1002, 1001, 1001, -1]})  # fmt: skip
+    q = camera_quality(noisy, labels).set_index("camera")
+    assert q.index.tolist() == ["cam01", "cam02", "cam03", "cam04"]
+    t = tracks.set_index("camera")
+    for cam in q.index:
+        mine = t.loc[cam]
+        recorded = mine[mine["reason"] != "not_recorded"]
+        assert q.loc[cam, "target_frames"] == len(recorded)
+        assert q.loc[cam, "tracked_share"] == pytest.approx((recorded["reason"] == "").mean())
+    assert len(t.loc["cam03"]) > q.loc["cam03", "target_frames"]  # frame 4 not recorded
+    assert q.loc["cam01", "sigma_median_px"] == pytest.approx(0.03)
+    assert q.loc["cam02", "sigma_median_px"] == pytest.approx(0.2)
+    assert 0.28 < q.loc["cam02", "sigma_p95_px"] < 0.3
+    assert (q.loc["cam01", "labelled_frames"], q.loc["cam01", "labelled_median"]) == (2, 1.5)
+    assert q.loc["cam02", "labelled_median"] == 1 and np.isnan(q.loc["cam03", "labelled_median"])
+    assert np.isnan(camera_quality(tracks)["labelled_median"]).all()
+    img = camera_quality_plot(q.reset_index())
+    assert img.shape[1] == 900 and img.shape[0] >= 680
+    _drawn(img)
+    assert (img == REPORTED).all(axis=2).any()  # the tracked share's bars
+    lost = tracks.assign(reason="lost", sigma_px=np.nan)  # nothing tracked: n/a, no sigma
+    q_lost = camera_quality(lost)
+    assert (q_lost["tracked_share"] == 0).all() and q_lost["sigma_median_px"].isna().all()
+    _drawn(camera_quality_plot(q_lost))
+
+
+def test_volume_plot_band_and_measured_fraction(volume):
+    v0 = float(volume["volume_mm3"].iloc[0])
+    extra = volume.assign(volume_sigma_mm3=0.002 * v0, measured_fraction=np.linspace(0.95, 0.8, FRAMES))
+    img = volume_strain_plot(extra)
+    assert img.shape == (680 + 260, 900, 3)
+    _drawn(img)
+    band = np.array(PALETTE[9])  # the +- 1 sigma lines (thin, antialiased: near their colour)
+
+    def near(im: np.ndarray) -> int:
+        return int((np.abs(im[:340].astype(int) - band).max(axis=2) < 40).sum())
+
+    assert near(img) > 200 and near(volume_strain_plot(volume)) == 0
+    no_sigma = volume_strain_plot(extra.assign(volume_sigma_mm3=np.nan))
+    assert no_sigma.shape == img.shape and near(no_sigma) == 0
 
 
 # --------------------------------------------------------------------------- movie

@@ -70,3 +70,68 @@ def test_tracking_and_volume_errors_fail(small_test, tmp_path):
     lost = points[~((points.frame == 3) & points.id.isin(seen.iloc[: len(seen) // 10]))]
     rows = score_kept(lost, points, table, tol)
     assert not rows.passed.any() and rows.value.iloc[0] == pytest.approx(1 - (len(seen) // 10) / len(seen))
+
+
+def test_volume_uncertainty_and_measured_fraction_are_reported(small_test):
+    """error / volume_sigma_mm3 per frame and the smallest measured_fraction: reported only."""
+    import numpy as np
+    import pandas as pd
+
+    from triaxtrack.score import score_volume
+
+    vol = pd.read_parquet(small_test / "truth" / "volume.parquet")
+    v0 = float(vol.volume_mm3.iloc[0])
+    got = vol.assign(volume_mm3=vol.volume_mm3 + [0.0, 0.001 * v0, 0.0, 0.002 * v0],
+                     volume_sigma_mm3=[0.0005 * v0, 0.0005 * v0, np.nan, 0.0005 * v0],
+                     measured_fraction=[0.9, 0.7, 0.85, 0.8])  # fmt: skip
+    rows = score_volume(got, vol, ScoreTolerances())
+    by_item = rows.set_index(["metric", "item"])
+    assert by_item.loc[("volume_error_sigmas", "worst@3"), "value"] == pytest.approx(4, rel=1e-3)
+    assert by_item.loc[("volume_error_sigmas", "all@0"), "value"] == 0
+    sig = rows[rows.metric == "volume_error_sigmas"]
+    assert sig.tolerance.isna().all() and sig.passed.all() and "all@2" not in set(sig["item"])  # NaN sigma
+    assert by_item.loc[("measured_fraction_min", "worst@1"), "value"] == 0.7
+    passed = rows.groupby("metric").passed.all()  # 0.2 % off: within 0.25 % but its change is not
+    assert passed["volume_error"] and not passed["volume_change_error"]
+    plain = score_volume(vol, vol, ScoreTolerances())
+    assert plain.passed.all()
+    assert not plain.metric.isin(["volume_error_sigmas", "measured_fraction_min"]).any()
+
+
+def test_per_camera_sigma_rows_and_summary(small_test, tmp_path, capsys):
+    """tracking.parquet gives reported-only per-camera rows and a per-camera summary after the
+    main table; a camera with noisier footage shows a larger sigma."""
+    import numpy as np
+    import pandas as pd
+
+    from triaxtrack.camera_report import camera_summary, format_camera_summary
+    from triaxtrack.tables import TRACKS, write_table
+
+    obs = pd.read_parquet(small_test / "truth" / "observations.parquet")
+    sigma = np.where(obs.camera == "cam02", 0.2, 0.05)
+    lost = (obs.camera == "cam03") & (obs.index % 4 == 0)  # a quarter of cam03's targets lost
+    reason = np.where(lost, "lost", "")
+    tracks = obs.assign(area_px=20.0, sigma_px=np.where(lost, np.nan, sigma), reason=reason)
+    write_table(tracks, tmp_path / "tracking.parquet", TRACKS)
+    df = score(tmp_path, small_test)
+    rows = df.set_index(["metric", "item"])
+    assert rows.loc[("centroid_sigma_median", "cam02"), "value"] == pytest.approx(0.2)
+    assert rows.loc[("centroid_sigma_p95", "cam01"), "value"] == pytest.approx(0.05)
+    assert rows.loc[("tracked_share", "cam01"), "value"] == 1
+    assert rows.loc[("tracked_share", "cam03"), "value"] == pytest.approx(0.75, abs=0.01)
+    assert df.tolerance.isna().all() and df.passed.all()
+
+    coverage = pd.DataFrame({"metric": "coverage", "item": ["cam01@0", "cam01@3", "cam02@0"],
+                             "value": [0.9, 0.8, 0.95], "tolerance": 0.95, "unit": "", "passed": False,
+                             "source": "labels.parquet"})  # fmt: skip
+    summary = camera_summary(pd.concat([coverage, df], ignore_index=True)).set_index("camera")
+    assert summary.index.tolist() == ["cam01", "cam02", "cam03"]
+    assert summary.loc["cam01", ["coverage_min", "coverage_median"]].tolist() == pytest.approx([0.8, 0.85])
+    assert np.isnan(summary.loc["cam03", "coverage_min"])
+    assert summary.loc["cam02", "sigma_median_px"] == pytest.approx(0.2)
+    text = format_camera_summary(summary.reset_index())
+    assert "0.800 / 0.850" in text and "75.0" in text and len(text.splitlines()) == 2 + 3
+    assert format_camera_summary(camera_summary(df.iloc[:0])) == ""
+    assert main(["score", str(tmp_path), str(small_test)]) == 0
+    out = capsys.readouterr().out
+    assert out.index("within tolerance") < out.index("per camera:") and "cam03" in out.split("per camera:")[1]

@@ -58,6 +58,7 @@ def _check_sim(args: argparse.Namespace) -> int:
 def _score(args: argparse.Namespace) -> int:
     import yaml
 
+    from triaxtrack.camera_report import camera_summary, format_camera_summary
     from triaxtrack.score import ScoreTolerances, format_table, score
 
     tol = ScoreTolerances()
@@ -69,6 +70,9 @@ def _score(args: argparse.Namespace) -> int:
         print(f"triaxtrack score: {err}", file=sys.stderr)
         return 2
     print(format_table(df))
+    summary = format_camera_summary(camera_summary(df))
+    if summary:
+        print(f"\n{summary}")
     if args.json:
         Path(args.json).write_text(json.dumps(df.to_dict(orient="records"), indent=2, default=float))
     return 0 if df.passed.all() else 1

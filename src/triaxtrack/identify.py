@@ -501,6 +501,49 @@ def _neighbour_down(f: _Frame, ct_id: int, centres: dict, labelled: dict, design
     return None
 
 
+def _hide_behind_band(f: _Frame, pool: _Pool, order: np.ndarray, pad: np.ndarray, design: dict) -> None:
+    """Take out of the pool (reason given) the free dots whose image reaches the white band of
+    a longitudinal stripe whose dots, in order along it, are ``order`` (blob indices): within
+    half the band's width of the line through them plus ``pad`` (per blob, pixels)."""
+    line = f.pos[order]
+    # pixels per mm across the band at each stripe dot: its minor axis (the band is
+    # foreshortened across, towards a silhouette, never along)
+    across = f.blobs.minor_px.to_numpy()[order] / design["cell_targets"]["longitudinal_dot_diameter"]
+    half = design["cell_targets"]["longitudinal_band_width"] / 2
+    radius = half * np.maximum(across[:-1], across[1:])
+    hide = _near_polyline(f.pos, line, radius, pad) & pool.free
+    pool.free[hide] = False
+    f.reason[hide] = "on a longitudinal stripe's band"
+
+
+MIN_CHAIN_DOTS = 8  # a straight line of at least this many dots on another surface is a stripe
+CHAIN_LINE_PX = 1.0  # ... within this of a straight line (undistorted pixels: a generatrix of the
+# cell images straight)
+CHAIN_AXIS_DEG = 15.0  # a stripe runs along the specimen's axis (tilted cameras, distortion)
+
+
+def _straight_chains(pos: np.ndarray, cand: np.ndarray, axis: np.ndarray) -> list[np.ndarray]:
+    """Longitudinal stripes among the blobs ``cand`` (indices; ``pos`` undistorted pixels): each
+    a straight line of at least ``MIN_CHAIN_DOTS`` of them (RANSAC) along the specimen's axis
+    (``axis``: its image direction, within ``CHAIN_AXIS_DEG``), its blobs in order along it."""
+    from skimage.measure import LineModelND, ransac
+
+    left = np.asarray(cand, np.int64)
+    out = []
+    while len(left) >= MIN_CHAIN_DOTS:
+        model, inl = ransac(pos[left], LineModelND, min_samples=2, residual_threshold=CHAIN_LINE_PX,
+                            max_trials=200, rng=0)  # fmt: skip
+        if model is None or inl is None or inl.sum() < MIN_CHAIN_DOTS:
+            break
+        members = left[inl]
+        left = left[~inl]
+        if abs(model.direction @ axis) < np.cos(np.deg2rad(CHAIN_AXIS_DEG)):
+            continue  # a row of a ring's dots, not a stripe
+        along = (pos[members] - model.origin) @ model.direction
+        out.append(members[np.argsort(along)])
+    return out
+
+
 def _near_polyline(
     points: np.ndarray, line: np.ndarray, radius: np.ndarray, pad: np.ndarray | float = 0.0
 ) -> np.ndarray:
@@ -987,21 +1030,18 @@ def identify(
     # reaches the band's (half its major axis and BAND_BLUR_PX from it) is partly hidden and its
     # centroid is biased, so drop what remains there
     long_names = {s["name"] for s in design["cell_targets"]["longitudinal_stripes"]}
-    for name in long_names:
-        sel = np.nonzero(f.group == name)[0]
+    # the band's blurred edge reaches two lens-blur sigmas beyond its printed edge
+    pad = blobs.major_px.to_numpy() / 2 + max(BAND_BLUR_PX, BLUR_REACH * blur_px)
+    for sel in (np.nonzero(f.group == nm)[0] for nm in long_names):
         if len(sel) >= 2:
-            order = sel[np.argsort(f.ids[sel])]
-            line = pos[order]
-            # pixels per mm across the band at each stripe dot: its minor axis (the band is
-            # foreshortened across, towards a silhouette, never along)
-            across = blobs.minor_px.to_numpy()[order] / design["cell_targets"]["longitudinal_dot_diameter"]
-            half = design["cell_targets"]["longitudinal_band_width"] / 2
-            radius = half * np.maximum(across[:-1], across[1:])
-            # the band's blurred edge reaches two lens-blur sigmas beyond its printed edge
-            pad = blobs.major_px.to_numpy() / 2 + max(BAND_BLUR_PX, BLUR_REACH * blur_px)
-            hide = _near_polyline(pos, line, radius, pad) & pool.free
-            pool.free[hide] = False
-            f.reason[hide] = "on a longitudinal stripe's band"
+            _hide_behind_band(f, pool, sel[np.argsort(f.ids[sel])], pad, design)
+    # a stripe whose coded target is out of the picture is a straight line of free dots on a
+    # white band in front of the membrane: never membrane dots, and its band hides the membrane
+    axis = _axis_down(_pedestal_anchors(centres, design))
+    for order in _straight_chains(pos, np.nonzero(_on_another_surface(pool))[0], axis):
+        pool.free[order] = False
+        f.reason[order] = "on a longitudinal stripe not identified (its coded target not seen)"
+        _hide_behind_band(f, pool, order, pad, design)
     _label_membrane(f, pool, centres, design, p)
     # a dot too small or seen too obliquely for its place (see IdentifyParams: cell-wall dots
     # beside a dark edge need more) has no accurate centroid: not reported; nor has the last dot
@@ -1146,6 +1186,26 @@ def _split_merged_pairs(
                          "area_px": area[k] / 2, "roundness": roundness, "quality": MERGED_QUALITY,
                          "reason": ""})  # fmt: skip
     return pd.DataFrame(rows, columns=[c for c in LABEL_COLUMNS if "undist" not in c])
+
+
+SURFACE_NEIGHBOURS = 8  # free dots around a dot whose white level is the surface's
+
+
+def _on_another_surface(pool: _Pool) -> np.ndarray:
+    """Which free dots lie on a surface whose white level differs by more than
+    ``WHITE_TOLERANCE`` from the median of their ``SURFACE_NEIGHBOURS`` nearest free dots' (a
+    stripe's white band in front of the grey membrane, a strap across it); the white level
+    follows uneven light smoothly, a printed surface's edge does not."""
+    free = np.nonzero(pool.free)[0]
+    out = np.zeros(len(pool.free), bool)
+    if len(free) <= SURFACE_NEIGHBOURS:
+        return out
+    tree = cKDTree(pool.pos[free])
+    _, nb = tree.query(pool.pos[free], k=SURFACE_NEIGHBOURS + 1)
+    white = pool.white[free]
+    ratio = white / np.median(white[nb[:, 1:]], axis=1)
+    out[free] = np.abs(ratio - 1) > WHITE_TOLERANCE
+    return out
 
 
 def _is_membrane(ids: np.ndarray, m: dict) -> np.ndarray:

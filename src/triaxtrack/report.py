@@ -440,9 +440,11 @@ def chosen_frames(frames: Iterable[int], n: int) -> list[int]:
 
 
 def volume_strain_plot(volume: pd.DataFrame, width: int = 900) -> np.ndarray:
-    """Two panels against time (s): the volume change (mm^3, from ``volume_change_mm3`` or else
-    ``volume_mm3`` minus its first value) and the axial, radial (if the column is there) and
-    volumetric strain (%, compression positive). ``volume``: a ``tables.VOLUME`` table."""
+    """Panels against time (s): the volume change (mm^3, from ``volume_change_mm3`` or else
+    ``volume_mm3`` minus its first value; with ``volume_sigma_mm3``, thin lines at +- 1 sigma of
+    the volume) and the axial, radial (if the column is there) and volumetric strain (%,
+    compression positive); with ``measured_fraction``, a third: the share of the membrane's dots
+    measured (%). ``volume``: a ``tables.VOLUME`` table (``VOLUME_RESULT``'s columns optional)."""
     v = volume.sort_values("frame")
     t = v["time_s"].to_numpy(float)
     if "volume_change_mm3" in v and v["volume_change_mm3"].notna().any():
@@ -451,14 +453,16 @@ def volume_strain_plot(volume: pd.DataFrame, width: int = 900) -> np.ndarray:
         vol = v["volume_mm3"].to_numpy(float)
         first = vol[np.isfinite(vol)][:1]
         dv = vol - (first[0] if first.size else np.nan)
+    sigma = v["volume_sigma_mm3"].to_numpy(float) if "volume_sigma_mm3" in v else np.full(len(v), np.nan)
+    band = [Series(lab, t, dv + k * sigma, PALETTE[9], 1) for lab, k in (("+- 1 sigma", 1), ("", -1))]
     top = line_chart(
-        [Series("volume change", t, dv, PALETTE[0])],
+        [Series("volume change", t, dv, PALETTE[0]), *band],
         "volume change of the specimen",
         "time (s)",
         "volume change (mm^3)",
         (width, 340),
         hlines=[0.0],
-        legend="",
+        legend="left" if np.isfinite(sigma).any() else "",
     )
     strains = [
         ("axial", "axial_strain", PALETTE[0]),
@@ -475,7 +479,11 @@ def volume_strain_plot(volume: pd.DataFrame, width: int = 900) -> np.ndarray:
         (width, 340),
         hlines=[0.0],
     )
-    return np.vstack([top, bottom])
+    if "measured_fraction" not in v:
+        return np.vstack([top, bottom])
+    dots = [Series("measured", t, 100 * v["measured_fraction"].to_numpy(float), PALETTE[2])]
+    third = line_chart(dots, "membrane dots measured", "time (s)", "measured (%)", (width, 260), legend="")
+    return np.vstack([top, bottom, third])
 
 
 # --------------------------------------------------------------------------- strain maps

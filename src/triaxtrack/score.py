@@ -392,7 +392,10 @@ def score_volume(
 ) -> pd.DataFrame:
     """Per processed frame: the volume's relative error (``volume_error``), the volume change's
     error over the true initial volume (``volume_change_error``) and the axial strain's error,
-    cut down by :func:`summarise_frames`; a frame the results do not measure fails."""
+    cut down by :func:`summarise_frames`; a frame the results do not measure fails. Reported
+    only, when ``volume`` has the columns: ``volume_error_sigmas`` = |V - V_true| /
+    ``volume_sigma_mm3`` (frames with a finite, positive sigma) and ``measured_fraction_min``,
+    the smallest share of membrane dots measured (item ``worst@<frame>``)."""
     missing = sorted(set(volume["frame"]) - set(truth["frame"]))
     if missing:
         raise ValueError(f"{source}: frames {missing[:5]} are not in the truth")
@@ -410,12 +413,20 @@ def score_volume(
             _metric("axial_strain_error", item, abs(r.axial_strain - r.axial_strain_true), tol.axial_strain,
                     "", source),
         ]  # fmt: skip
+        sigma = getattr(r, "volume_sigma_mm3", np.nan)
+        if np.isfinite(sigma) and sigma > 0 and np.isfinite(r.volume_mm3):
+            err = abs(r.volume_mm3 - r.volume_mm3_true) / sigma
+            rows.append(_metric("volume_error_sigmas", item, err, unit="sigma", source=source))
     out = summarise_frames(pd.DataFrame(rows, columns=COLUMNS))
     measured = int(np.isfinite(volume["volume_mm3"]).sum())
     share = float(measured) / max(len(volume), 1)
-    row = _metric("frames_measured", "all", share, 1.0, "", source, minimum=True)
-    out = pd.concat([out, pd.DataFrame([row], columns=COLUMNS)])
-    return out.reset_index(drop=True)
+    extra = [_metric("frames_measured", "all", share, 1.0, "", source, minimum=True)]
+    fraction = volume["measured_fraction"] if "measured_fraction" in volume else pd.Series(dtype=float)
+    if fraction.notna().any():
+        k = fraction.astype(float).idxmin()
+        item = f"worst@{volume.loc[k, 'frame']}"
+        extra.append(_metric("measured_fraction_min", item, float(fraction[k]), source=source))
+    return pd.concat([out, pd.DataFrame(extra, columns=COLUMNS)]).reset_index(drop=True)
 
 
 def score_quality(quality: dict, tol: ScoreTolerances, source: str = "quality.json") -> pd.DataFrame:
@@ -457,6 +468,8 @@ def score(results_dir: str | Path, truth_dir: str | Path, tol: ScoreTolerances |
         parts.append(_score_points(results_dir / "points.parquet", truth_dir, tol))
     if (results_dir / "tracking.parquet").exists() and (results_dir / "observations.parquet").exists():
         parts.append(_score_tracking(results_dir / "observations.parquet", truth_dir, tol))
+    if (results_dir / "tracking.parquet").exists():
+        parts.append(_score_cameras_footage(results_dir))
     if (results_dir / "volume.parquet").exists():
         from triaxtrack.tables import VOLUME, read_table
 
@@ -517,6 +530,16 @@ def _score_tracking(path: Path, truth_dir: Path, tol: ScoreTolerances) -> pd.Dat
 
     truth = read_table(truth_dir / "observations.parquet", OBSERVATIONS)
     return score_tracking(read_table(path, OBSERVATIONS), truth, tol, path.name)
+
+
+def _score_cameras_footage(results_dir: Path) -> pd.DataFrame:
+    """Per-camera centroid uncertainty and tracked share of a results folder's tracking.parquet
+    (:mod:`triaxtrack.camera_report`; reported only)."""
+    from triaxtrack.camera_report import camera_quality, score_camera_quality
+    from triaxtrack.tables import TRACKS, read_table
+
+    tracks = read_table(results_dir / "tracking.parquet", TRACKS)
+    return score_camera_quality(camera_quality(tracks), "tracking.parquet")
 
 
 def format_table(df: pd.DataFrame) -> str:

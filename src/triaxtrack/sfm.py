@@ -15,6 +15,15 @@ no feature matching:
    and point moved so that its axis is the z axis (:func:`axis_frame`): the frame in which
    :mod:`triaxtrack.optics` traces rays through the wall.
 
+A camera that labels too few cell-wall targets is posed from the targets in the water instead
+(pedestal CTs, membrane dots at their design positions: the specimen is undeformed at the
+reference frame), through the cell wall, by :mod:`triaxtrack.refractive_pose`: against the
+fitted cell when two or more cameras were posed in air, otherwise against the nominal cell of
+the kit (radii and indices of ``kit.json``, axis on the pedestals' axis, as a lab centres it),
+in the design frame. Each camera says how it was posed (``pose_from``: ``cell_wall`` or
+``water``); a camera that cannot be posed is left out with the reason; fewer than two posed
+cameras is an error naming every camera and what it labelled.
+
 The rotation about the axis and the height of the origin are fixed later, from the bottom
 pedestal's coded targets (:func:`triaxtrack.triangulate.pedestal_frame`), as ``target-kit.md``
 defines the cell frame. Units: millimetres, pixels in OpenCV convention (the centre of the
@@ -24,18 +33,22 @@ way in and out.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, field, fields, replace
 
 import cv2
 import numpy as np
 import pandas as pd
 from scipy.optimize import least_squares
 
-from triaxtrack.optics import Camera, project_air
+from triaxtrack.optics import Camera, CellOptics, project_air
+from triaxtrack.refractive_pose import PoseObservations, pose_camera
 
 COLMAP_PIXEL_OFFSET = 0.5  # COLMAP puts the centre of the top-left pixel at (0.5, 0.5)
 FULL_OPENCV_DIST = 8  # k1 k2 p1 p2 k3 k4 k5 k6: COLMAP's FULL_OPENCV holds both OpenCV models
 MAX_BA_ROUNDS = 4  # bundle adjustments, each after dropping the observations above the limit
+REFERENCE_FRAME = 0  # the frame whose water targets are at their design positions (undeformed specimen)
+NOMINAL_RADIUS_SIGMA_MM = 0.5  # standard error of a nominal outer radius (tube tolerance), the
+# prior of triaxtrack.triangulate.refine_cell when the radius was not fitted in air
 
 
 @dataclass(frozen=True)
@@ -44,8 +57,10 @@ class SfmConfig:
 
     ``ransac_px``: PnP inlier threshold; ``max_residual_px``: an observation whose residual after
     the bundle adjustment exceeds this is dropped (and the adjustment run again);
-    ``min_targets``: a camera with fewer cell-wall targets (after PnP) is left out, with the
-    reason; ``refine_intrinsics``: let the bundle adjustment refine focal lengths, principal
+    ``min_targets``: a camera with fewer cell-wall targets (after PnP) is posed from the targets
+    in the water, and one with fewer targets of any kind is left out, with the reason;
+    ``pose_from_water``: pose such cameras through the wall (False: leave them out);
+    ``refine_intrinsics``: let the bundle adjustment refine focal lengths, principal
     point and distortion (by default they stay as calibrated).
     """
 
@@ -53,6 +68,7 @@ class SfmConfig:
     max_residual_px: float = 1.0
     min_targets: int = 12
     refine_intrinsics: bool = False
+    pose_from_water: bool = True
 
     @staticmethod
     def from_dict(d: dict | None) -> SfmConfig:
@@ -82,6 +98,8 @@ class CellReconstruction:
     axis_tilt_deg: float  # angle of the fitted axis from the design's z axis
     scale: float  # design scale over the adjusted model's (1 when the design is exact)
     dropped: dict[str, str]  # camera -> why it was left out
+    posed_from: dict[str, dict] = field(default_factory=dict)  # camera -> pose_from, targets, rms_px
+    nominal: bool = False  # True: no camera saw enough of the wall; the cell is the kit's design
 
 
 def earliest_observations(labels: pd.DataFrame, ids: np.ndarray, min_targets: int = 1) -> pd.DataFrame:
@@ -291,22 +309,11 @@ def axis_frame(
     return A, -A @ foot
 
 
-def reconstruct_cell(
-    cameras: dict[str, Camera], labels: pd.DataFrame, design: pd.DataFrame, cfg: SfmConfig
+def _air_reconstruction(
+    posed: dict[str, Camera], obs: pd.DataFrame, design: pd.DataFrame, cfg: SfmConfig
 ) -> CellReconstruction:
-    """Cameras and cell wall from the labelled cell-wall targets (module docstring).
-
-    ``cameras``: calibrated intrinsics per camera; ``labels``: rows ``camera, frame, id, u_px,
-    v_px`` (every labelled frame; per camera its earliest frame with enough cell-wall targets
-    is used); ``design``: ``id, x_mm, y_mm, z_mm`` of the cell-wall targets (design positions).
-    Raises ValueError when fewer than two cameras can be posed.
-    """
-    obs = earliest_observations(labels, design["id"].to_numpy(), cfg.min_targets)
-    posed, obs, dropped = initial_poses(cameras, obs, design, cfg)
-    for name in sorted(set(cameras) - set(posed) - set(dropped)):
-        dropped[name] = "no frame with enough labelled cell-wall targets"
-    if len(posed) < 2:
-        raise ValueError(f"cameras and cell: only {len(posed)} camera(s) could be posed; {dropped}")
+    """Steps 2-4 of the module docstring for the cameras ``posed`` in air (two or more), from
+    their PnP observations ``obs`` (with ``inlier``)."""
     used = obs["inlier"].to_numpy().copy()
     reason = np.where(used, "", "PnP outlier").astype(object)
     for rounds in range(1, MAX_BA_ROUNDS + 1):
@@ -337,33 +344,190 @@ def reconstruct_cell(
     cams = {n: c.transformed(s, A, b).transformed(1.0, A2, b2) for n, c in adj_cams.items()}
     res = reprojection_residuals(cams, obs, pts).assign(used=used, reason=reason)
     err = np.hypot(res["du_px"], res["dv_px"]).to_numpy()
-    stats = pd.DataFrame({"id": res["id"], "e2": err**2, "used": used})[used]
+    stats = pd.DataFrame({"id": res["id"], "e2": err**2, "used": used, "camera": res["camera"]})[used]
     per = stats.groupby("id").agg(n_rays=("e2", "size"), ms=("e2", "mean"))
     pts = pts.set_index("id").join(per).reset_index()
     pts = pts.assign(n_rays=pts["n_rays"].astype(np.int64), rms_px=np.sqrt(pts.pop("ms")))
     cylinder = Cylinder(np.zeros(3), np.array([0.0, 0.0, 1.0]), cyl.radius, cyl.rms_mm)
-    return CellReconstruction(cams, pts, res.drop(columns="inlier"), cylinder, tilt, s, dropped)
+    by_cam = stats.groupby("camera")["e2"]
+    posed_from = {
+        n: {
+            "pose_from": "cell_wall",
+            "targets": int(by_cam.size()[n]),
+            "rms_px": float(np.sqrt(by_cam.mean()[n])),
+        }
+        for n in cams
+    }
+    return CellReconstruction(cams, pts, res.drop(columns="inlier"), cylinder, tilt, s, {}, posed_from)
+
+
+def _nominal_reconstruction(cell: CellOptics, labels: pd.DataFrame) -> CellReconstruction:
+    """No camera posed in air: no wall points or residuals (columns those of ``labels`` and the
+    residuals'), the kit's cell (axis = z axis of the design)."""
+    points = pd.DataFrame({"id": np.zeros(0, np.int64), **{c: np.zeros(0) for c in ("x_mm", "y_mm", "z_mm")},
+                           "n_rays": np.zeros(0, np.int64), "rms_px": np.zeros(0)})  # fmt: skip
+    residuals = labels.iloc[:0].assign(du_px=np.zeros(0), dv_px=np.zeros(0), used=np.zeros(0, bool),
+                                       reason=np.zeros(0, object))  # fmt: skip
+    cylinder = Cylinder(np.zeros(3), np.array([0.0, 0.0, 1.0]), cell.outer_radius, float("nan"))
+    return CellReconstruction({}, points, residuals, cylinder, float("nan"), 1.0, {}, {}, nominal=True)
+
+
+def _label_counts(labels: pd.DataFrame, kinds: pd.Series) -> dict[str, str]:
+    """Per camera, its labelled targets by kind (``kinds``: id -> kind) at its best frame, as text."""
+    lab = labels[labels["id"].isin(kinds.index)]
+    per = lab.assign(kind=lab["id"].map(kinds)).groupby(["camera", "frame", "kind"]).size()
+    best = per.groupby(["camera", "kind"]).max()
+    out = {}
+    for name in labels["camera"].unique():
+        counts = best.get(name, pd.Series(dtype=int))
+        out[str(name)] = ", ".join(f"{int(counts.get(k, 0))} {k}" for k in sorted(set(kinds)))
+    return out
+
+
+def _pose_through_wall(
+    intrinsics: Camera, labels: pd.DataFrame, known: pd.DataFrame, cell: CellOptics, cfg: SfmConfig
+) -> tuple[Camera, dict, pd.DataFrame] | str:
+    """One camera posed from its labels at ``REFERENCE_FRAME`` of the targets ``known`` (``id,
+    x_mm, y_mm, z_mm, in_water``) through ``cell`` (:func:`triaxtrack.refractive_pose.pose_camera`).
+    Returns the camera, its ``posed_from`` entry and the residual rows of its cell-wall
+    observations, or why it could not be posed."""
+    lab = labels[(labels["camera"] == intrinsics.name) & (labels["frame"] == REFERENCE_FRAME)]
+    lab = lab.merge(known, on="id").drop_duplicates("id").reset_index(drop=True)
+    if len(lab) < cfg.min_targets:
+        return (f"{len(lab)} targets of known position labelled at frame {REFERENCE_FRAME}, "
+                f"fewer than {cfg.min_targets}")  # fmt: skip
+    water = lab["in_water"].to_numpy(bool)
+    obs = PoseObservations(lab["id"].to_numpy(), lab[["x_mm", "y_mm", "z_mm"]].to_numpy(float),
+                           lab[["u_px", "v_px"]].to_numpy(float), water)  # fmt: skip
+    pose = pose_camera(intrinsics, obs, cell, cfg.min_targets, cfg.ransac_px)
+    if isinstance(pose, str):
+        return pose
+    info = {
+        "pose_from": "water" if water[pose.used].any() else "cell_wall",
+        "targets": int(pose.used.sum()),
+        "targets_in_water": int((pose.used & water).sum()),
+        "rms_px": pose.rms_px,
+    }
+    air = lab[~water]
+    rows = air[["camera", "frame", "id", "u_px", "v_px"]].assign(
+        du_px=pose.residuals[~water, 0], dv_px=pose.residuals[~water, 1], used=pose.used[~water],
+        reason=np.where(pose.used[~water], "", f"residual above {cfg.ransac_px} px"),
+    )  # fmt: skip
+    return pose.camera, info, rows
+
+
+def reconstruct_cell(
+    cameras: dict[str, Camera],
+    labels: pd.DataFrame,
+    design: pd.DataFrame,
+    cfg: SfmConfig,
+    water: pd.DataFrame | None = None,
+    cell: CellOptics | None = None,
+) -> CellReconstruction:
+    """Cameras and cell wall from the labelled targets (module docstring).
+
+    ``cameras``: calibrated intrinsics per camera; ``labels``: rows ``camera, frame, id, u_px,
+    v_px`` (every labelled frame; per camera its earliest frame with enough cell-wall targets
+    is used, and ``REFERENCE_FRAME`` for a pose through the wall); ``design``: ``id, x_mm, y_mm,
+    z_mm`` of the cell-wall targets (design positions); ``water``: the same of the targets in the
+    water whose design position holds at ``REFERENCE_FRAME`` (pedestal CTs, membrane dots; an
+    optional ``kind`` column names them in messages); ``cell``: the kit's cell (radii,
+    indices). Without ``water`` and ``cell`` only cameras that see the wall are posed. Raises
+    ValueError, naming every camera and what it labelled, when fewer than two can be posed.
+    """
+    obs = earliest_observations(labels, design["id"].to_numpy(), cfg.min_targets)
+    posed, obs, dropped = initial_poses(cameras, obs, design, cfg)
+    for name in sorted(set(cameras) - set(posed) - set(dropped)):
+        dropped[name] = "no frame with enough labelled cell-wall targets"
+    if len(posed) >= 2:
+        rec = _air_reconstruction(posed, obs, design, cfg)
+    elif water is not None and cell is not None and cfg.pose_from_water:
+        rec = _nominal_reconstruction(cell, labels)
+        dropped = {n: dropped.get(n, "no cell frame from the wall: posed through it") for n in cameras}
+    else:
+        rec = None
+    if rec is not None and water is not None and cell is not None and cfg.pose_from_water and dropped:
+        rec = _add_water_cameras(rec, cameras, labels, design, water, cell, cfg, dropped)
+        dropped = rec.dropped
+    if rec is None or len(rec.cameras) < 2:
+        kinds = pd.Series("cell-wall", index=design["id"].to_numpy())
+        if water is not None:
+            wk = water["kind"].to_numpy() if "kind" in water.columns else "in-water"
+            kinds = pd.concat([kinds, pd.Series(wk, index=water["id"].to_numpy())])
+        counts = _label_counts(labels, kinds)
+        why = "; ".join(
+            f"{n}: {counts.get(n, 'nothing')} labelled: {dropped.get(n, 'posed')}" for n in sorted(cameras)
+        )
+        n = len(posed) if rec is None else len(rec.cameras)
+        raise ValueError(f"cameras and cell: only {n} camera(s) could be posed; {why}")
+    return replace(rec, dropped=dict(sorted(dropped.items())))
+
+
+def _add_water_cameras(
+    rec: CellReconstruction,
+    cameras: dict[str, Camera],
+    labels: pd.DataFrame,
+    design: pd.DataFrame,
+    water: pd.DataFrame,
+    cell: CellOptics,
+    cfg: SfmConfig,
+    dropped: dict[str, str],
+) -> CellReconstruction:
+    """``rec`` with the cameras of ``dropped`` posed through the wall where they can be: against
+    the fitted cell (its radius, the kit's wall thickness and indices) in the axis frame, or the
+    kit's cell when ``rec.nominal``. Cell-wall targets are at their adjusted positions where the
+    air reconstruction has them, else at their design positions."""
+    wall = design.set_index("id")[["x_mm", "y_mm", "z_mm"]]
+    if len(rec.points):
+        wall.update(rec.points.set_index("id")[["x_mm", "y_mm", "z_mm"]])
+    in_water = water[["id", "x_mm", "y_mm", "z_mm"]].assign(in_water=True)
+    known = pd.concat([wall.reset_index().assign(in_water=False), in_water], ignore_index=True)
+    thickness = cell.outer_radius - cell.inner_radius
+    optics = replace(cell, outer_radius=rec.cylinder.radius, inner_radius=rec.cylinder.radius - thickness)
+    cams, posed_from, left, rows = dict(rec.cameras), dict(rec.posed_from), {}, [rec.residuals]
+    for name in sorted(dropped):
+        out = _pose_through_wall(cameras[name], labels, known, optics, cfg)
+        if isinstance(out, str):
+            left[name] = f"{dropped[name]}; through the wall: {out}"
+            continue
+        cams[name], posed_from[name], air_rows = out
+        rows.append(air_rows)
+    rows = [r for r in rows if len(r)]
+    residuals = pd.concat(rows, ignore_index=True) if rows else rec.residuals
+    return replace(rec, cameras=cams, posed_from=posed_from, dropped=left, residuals=residuals)
 
 
 def cell_summary(rec: CellReconstruction) -> dict:
-    """The reconstruction as JSON: ``cameras`` (as ``cameras.json``, in the axis frame), the
-    fitted ``cell`` and what was left out (``cameras_dropped``)."""
-    used = rec.residuals[rec.residuals["used"]]
-    err = np.hypot(used["du_px"], used["dv_px"])
+    """The reconstruction as JSON: ``cameras`` (as ``cameras.json``, in the axis frame), how each
+    was posed (``cameras_posed``: ``pose_from``, targets used, RMS residual px), the ``cell``
+    (fitted in air, or the kit's nominal cell: ``source``) and what was left out
+    (``cameras_dropped``). Values that were not measured are null."""
+    used = rec.residuals[rec.residuals["used"].astype(bool)]
+    err = np.hypot(used["du_px"].astype(float), used["dv_px"].astype(float))
     n = len(rec.points)
+    if rec.nominal:
+        frame = (
+            "design frame: the kit's nominal cell on the pedestals' axis (no camera saw enough of the wall)"
+        )
+        sigma, rms, tilt = NOMINAL_RADIUS_SIGMA_MM, None, None
+    else:
+        frame = "axis frame: cell axis = z axis; rotation about it and origin height from the printed cell"
+        sigma, rms, tilt = rec.cylinder.rms_mm / np.sqrt(max(n, 1)), rec.cylinder.rms_mm, rec.axis_tilt_deg
     return {
-        "frame": "axis frame: cell axis = z axis; rotation about it and origin height from the printed cell",
+        "frame": frame,
         "cameras": {name: cam.to_json() for name, cam in sorted(rec.cameras.items())},
+        "cameras_posed": dict(sorted(rec.posed_from.items())),
         "cell": {
+            "source": "nominal" if rec.nominal else "cell_wall",
             "outer_radius_mm": rec.cylinder.radius,
-            "outer_radius_sigma_mm": rec.cylinder.rms_mm / np.sqrt(max(n, 1)),
-            "cylinder_rms_mm": rec.cylinder.rms_mm,
-            "axis_tilt_deg": rec.axis_tilt_deg,
+            "outer_radius_sigma_mm": sigma,
+            "cylinder_rms_mm": rms,
+            "axis_tilt_deg": tilt,
             "targets": n,
         },
         "design_scale": rec.scale,
-        "mean_reprojection_px": float(err.mean()) if len(err) else float("nan"),
+        "mean_reprojection_px": float(err.mean()) if len(err) else None,
         "observations_used": int(len(used)),
-        "observations_dropped": int((~rec.residuals["used"]).sum()),
+        "observations_dropped": int((~rec.residuals["used"].astype(bool)).sum()),
         "cameras_dropped": dict(sorted(rec.dropped.items())),
     }

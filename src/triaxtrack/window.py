@@ -4,10 +4,12 @@ predicted position, measured against the window's own white level and noise.
 In a square window around each prediction (all targets with the same window size at once, as
 ``(m, h, w)`` arrays):
 
-* the **white level** ``W`` is the median of the window's annulus (the pixels farther than the
-  blob's disc plus one pixel from the window centre: the surface around the dot), and the
-  **noise** ``sigma`` the robust standard deviation (1.4826 x the median absolute deviation) of
-  the same pixels, at least the 8-bit quantisation noise;
+* the **white level** ``W`` is the mean of the window's pixels between its 70th and 90th
+  percentiles (the surface around the dot: dots cover well under 30 % of a window), and the
+  **noise** ``sigma`` 1.4826 x the median deviation above ``W`` of the annulus's pixels (those
+  farther than the blob's disc plus one pixel from the window centre), held between the frame's
+  noise (the median over its windows: a codec flattens some) and ``STRUCTURE_K`` times it (the
+  dark beyond an edge fills others), at least the 8-bit quantisation noise;
 * a pixel is **ink** when its contrast ``W - grey`` exceeds ``ink_fraction`` x ``W`` and
   ``INK_NOISE_K`` x ``sigma``: both scale with a uniform change of brightness, unlike a fixed
   number of grey levels;
@@ -17,10 +19,11 @@ In a square window around each prediction (all targets with the same window size
   equally dark fully black dot) does not change when the whole window is brightened or dimmed;
   its standard uncertainty propagated from the pixel noise and the white level's is
   ``sigma_m^2 = n sigma^2 / W^2 + ((n - m) / W)^2 sigma_W^2`` (n pixels summed; ``sigma_W``
-  the median's uncertainty, ``1.2533 sigma / sqrt(annulus pixels)``);
+  the white level's uncertainty, ``sigma / sqrt(pixels averaged)``);
 * the **centroid uncertainty** per axis, for ``c = sum(w x) / sum(w)`` with ``w = W - grey``:
-  ``sigma_c^2 = (sigma^2 sum((x - c)^2) + sigma_W^2 (sum(x - c))^2) / (sum w)^2``; ``sigma_px``
-  is the RMS of the two axes' (the standard uncertainty of either coordinate).
+  ``sigma_c^2 = (sigma^2 sum((x - c)^2) + sigma_W^2 (sum(x - c))^2) / (sum w)^2``, scaled by
+  ``SIGMA_CALIBRATION`` (measured); ``sigma_px`` is the RMS of the two axes' (the standard
+  uncertainty of either coordinate).
 
 Pixels in OpenCV's convention (the centre of the top-left pixel is (0, 0)); grey levels of the
 8-bit frame.
@@ -37,10 +40,18 @@ INK_NOISE_K = 3.5  # ink: darker than the white level by at least this x the noi
 # Gaussian tail 2e-4: a stray ink pixel in one window in about twenty, and it must touch the blob)
 QUANTISATION_NOISE = 1 / np.sqrt(12)  # grey levels: the noise floor of an 8-bit frame
 MAD_TO_SIGMA = 1.4826  # median absolute deviation to standard deviation (normal noise)
-PLANE_RIDGE = 1e-9  # keeps the plane's normal equations solvable when the annulus is empty
-WHITE_FIT_PASSES = 2  # the white plane: fitted to the annulus, then again without dark outliers
+WHITE_BAND = (70.0, 90.0)  # the white level's percentiles (dots cover well under 30 % of a window)
+# the annulus's spread above the white level over the pixel noise: 0.647 for the half of normal
+# noise above its mean (the trimmed white level sits a little above the surface's mean, and the
+# dots' fringes widen the spread: noise 4 reads 5.2 on blurred synthetic dots, an overestimate)
+ABOVE_WHITE_SPREAD = 0.647
 ANNULUS_GAP_PX = 1.0  # the annulus starts this far beyond the disc (the blob's blurred fringe)
-GROW_PX = 2  # the centroid's weights: the blob grown by this (a blurred edge's fringe)
+# The centroid's uncertainty propagated from the pixel noise misses the noise of which pixels
+# cross the ink threshold at a blurred edge: on blurred, noisy synthetic dots (5-8 px, blur 1 px,
+# noise 4, read as 5.2; tests/test_track.py) the RMS of error / propagated sigma is 1.55, so the
+# propagated sigma is scaled by that
+SIGMA_CALIBRATION = 1.55
+GROW_PX = 1  # the centroid's weights: the blob grown by this (other ink excluded), as detection
 MIN_WHITE = 10.0  # grey levels: a window whose white is darker is under-exposed (a blank or
 # black frame): its noise is clipped at black, so no dot can be told from it ('lost')
 
@@ -87,29 +98,77 @@ def _masked_median(values: np.ndarray, use: np.ndarray) -> np.ndarray:
 def window_levels(
     patch: np.ndarray, annulus: np.ndarray, xs: np.ndarray, ys: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The white level of (m, h, w) windows as a plane fitted to their ``annulus`` pixels (an
-    (m, h, w) mask; ``xs``, ``ys`` the pixel offsets from the window centre), so that a gradient
-    of the light across a window does not pull the centroid; then refitted without the dark
-    outliers (the fringes of neighbouring dots). Returns ``(white (m, h, w), noise (m,),
-    sigma_white (m,))``: the plane, the robust standard deviation of the annulus about it (at
-    least the quantisation noise), and the plane's standard uncertainty at the centre."""
+    """The white level and pixel noise of (m, h, w) windows. The white level is the mean of each
+    window's pixels between its ``WHITE_BAND`` percentiles, as tracking always measured it (a
+    plane fitted to the ``annulus`` (an (m, h, w) mask) fails in a dense grid, whose annulus is
+    mostly the neighbours' edges; ``xs``, ``ys``: the pixel offsets from the window centre, kept
+    for the signature); the noise is the spread of the annulus's pixels above it, over
+    ``HALF_SPREAD`` (the brighter half of normal noise), at least the quantisation noise.
+    Returns ``(white (m, h, w), noise (m,), sigma_white (m,))``: the white level at every pixel,
+    the noise, and the white level's standard uncertainty."""
     m = len(patch)
-    x = np.broadcast_to(xs, (1, *patch.shape[1:])).ravel()
-    y = np.broadcast_to(ys, (1, *patch.shape[1:])).ravel()
-    P = np.stack([np.ones_like(x), x, y], axis=1)  # (p, 3): the plane's basis
-    Q = (P[:, :, None] * P[:, None, :]).reshape(len(x), 9)  # (p, 9): its products
     g = patch.reshape(m, -1)
-    use = np.broadcast_to(annulus, patch.shape).reshape(m, -1)
-    for _ in range(WHITE_FIT_PASSES):
-        wu = use.astype(np.float64)
-        M = (wu @ Q).reshape(m, 3, 3) + PLANE_RIDGE * np.eye(3)
-        coef = np.linalg.solve(M, ((wu * g) @ P)[..., None])[..., 0]
-        res = g - coef @ P.T
-        noise = MAD_TO_SIGMA * _masked_median(np.abs(res), use)
-        noise = np.maximum(np.nan_to_num(noise), QUANTISATION_NOISE)
-        use = use & (res > -INK_NOISE_K * noise[:, None])  # without the dark fringes
-    count = np.maximum(use.sum(axis=1), 3)
-    return (coef @ P.T).reshape(patch.shape), noise, noise / np.sqrt(count)
+    ring = np.broadcast_to(annulus, patch.shape).reshape(m, -1)
+    lo, hi = np.percentile(g, WHITE_BAND, axis=1)  # a trimmed mean: no 8-bit steps
+    band = (g >= lo[:, None]) & (g <= hi[:, None])
+    white = (g * band).sum(axis=1) / np.maximum(band.sum(axis=1), 1)
+    above = ring & (g >= white[:, None])
+    noise = MAD_TO_SIGMA * _masked_median(g - white[:, None], above) / ABOVE_WHITE_SPREAD
+    noise = np.maximum(np.nan_to_num(noise), QUANTISATION_NOISE)
+    count = np.maximum(band.sum(axis=1), 3)
+    return np.broadcast_to(white[:, None, None], patch.shape), noise, noise / np.sqrt(count)
+
+
+STRUCTURE_K = 3.0  # a window's noise above this x the frame's is structure, not noise
+FRAME_NOISE_SAMPLE = 400  # windows the frame's noise is the median of
+
+
+def _frame_noise(g: np.ndarray, uv_px: np.ndarray, radius_px: np.ndarray) -> float:
+    """The frame's pixel noise: the median of :func:`window_levels`' noise over (up to
+    ``FRAME_NOISE_SAMPLE``, evenly chosen) targets' windows inside the image, grey levels."""
+    H, W = g.shape
+    if len(uv_px) == 0:
+        return QUANTISATION_NOISE
+    pick = np.unique(np.linspace(0, len(uv_px) - 1, min(len(uv_px), FRAME_NOISE_SAMPLE)).astype(int))
+    h = int(np.ceil(np.nanmax(radius_px[pick]))) + 2
+    cu = np.rint(uv_px[pick, 0]).astype(np.int64)
+    cv = np.rint(uv_px[pick, 1]).astype(np.int64)
+    inside = (cu - h >= 0) & (cv - h >= 0) & (cu + h < W) & (cv + h < H)
+    if not inside.any():
+        return QUANTISATION_NOISE
+    off = np.arange(-h, h + 1)
+    patch = g[cv[inside, None, None] + off[None, :, None], cu[inside, None, None] + off[None, None, :]]
+    xs = off[None, None, :].astype(np.float64)
+    ys = off[None, :, None].astype(np.float64)
+    annulus = xs**2 + ys**2 > ((radius_px[pick][inside] + ANNULUS_GAP_PX) ** 2)[:, None, None]
+    _, noise, _ = window_levels(patch.astype(np.float64), annulus, xs, ys)
+    return float(max(np.median(noise), QUANTISATION_NOISE))
+
+
+STRUCTURE_K = 3.0  # a window's spread above this x the frame's noise is structure, not noise
+FRAME_NOISE_SAMPLE = 400  # windows the frame's noise is the median of
+
+
+def _frame_noise(g: np.ndarray, uv_px: np.ndarray, radius_px: np.ndarray) -> float:
+    """The frame's pixel noise: the median of :func:`window_levels`' noise over (up to
+    ``FRAME_NOISE_SAMPLE``, evenly chosen) targets' windows inside the image, grey levels."""
+    H, W = g.shape
+    if len(uv_px) == 0:
+        return QUANTISATION_NOISE
+    pick = np.unique(np.linspace(0, len(uv_px) - 1, min(len(uv_px), FRAME_NOISE_SAMPLE)).astype(int))
+    h = int(np.ceil(np.nanmax(radius_px[pick]))) + 2
+    cu = np.rint(uv_px[pick, 0]).astype(np.int64)
+    cv = np.rint(uv_px[pick, 1]).astype(np.int64)
+    inside = (cu - h >= 0) & (cv - h >= 0) & (cu + h < W) & (cv + h < H)
+    if not inside.any():
+        return QUANTISATION_NOISE
+    off = np.arange(-h, h + 1)
+    patch = g[cv[inside, None, None] + off[None, :, None], cu[inside, None, None] + off[None, None, :]]
+    xs = off[None, None, :].astype(np.float64)
+    ys = off[None, :, None].astype(np.float64)
+    annulus = xs**2 + ys**2 > ((radius_px[pick][inside] + ANNULUS_GAP_PX) ** 2)[:, None, None]
+    _, noise, _ = window_levels(patch.astype(np.float64), annulus, xs, ys)
+    return float(max(np.median(noise), QUANTISATION_NOISE))
 
 
 def measure_windows(
@@ -133,6 +192,8 @@ def measure_windows(
     finite = np.isfinite(uv_px).all(axis=1) & np.isfinite(radius_px)
     reason[~finite] = "lost"
     half = np.where(finite, np.ceil(np.nan_to_num(radius_px)).astype(np.int64) + 2, 0)
+    frame_noise = _frame_noise(g, uv_px[finite], radius_px[finite])
+    frame_noise = _frame_noise(g, uv_px[finite], radius_px[finite])
     for h in np.unique(half[finite]):
         sel = np.nonzero(finite & (half == h))[0]
         cu = np.rint(uv_px[sel, 0]).astype(np.int64)
@@ -150,6 +211,14 @@ def measure_windows(
         rad = radius_px[sel]
         annulus = xs**2 + ys**2 > ((rad + ANNULUS_GAP_PX) ** 2)[:, None, None]
         plane, noise, s_white = window_levels(patch, annulus, xs, ys)
+        # the codec flattens some windows' white (their spread reads below the noise) and the
+        # dark beyond an edge fills others' (far above it): each is held to the frame's noise
+        noise = np.clip(noise, frame_noise, STRUCTURE_K * frame_noise)
+        # a window whose annulus is mostly structure (the dark beyond an edge) reads a spread far
+        # above the noise: it takes the frame's noise (the median over every window)
+        structured = noise > STRUCTURE_K * frame_noise
+        noise = np.where(structured, frame_noise, noise)
+        s_white = np.where(structured, frame_noise / np.sqrt(annulus.sum(axis=(1, 2))), s_white)
         white = plane[:, h, h]  # at the window centre
         contrast = plane - patch
         level = np.maximum(INK_NOISE_K * noise[:, None, None], ink_fraction * plane)
@@ -195,6 +264,6 @@ def measure_windows(
         area[sel] = npx
         mass[sel] = m_norm
         smass[sel] = np.sqrt(var_m)
-        spx[sel] = np.where(keep, np.sqrt((var_u + var_v) / 2), np.nan)
+        spx[sel] = np.where(keep, SIGMA_CALIBRATION * np.sqrt((var_u + var_v) / 2), np.nan)
         white_all[sel], noise_all[sel] = white, noise
     return WindowMeasure(out, area, mass, smass, spx, white_all, noise_all, reason)

@@ -4,7 +4,10 @@
 
 rule reconstruct_cell:
     """Pose every camera by PnP on its cell-wall targets, bundle-adjust cameras and targets with
-    pycolmap, scale to the design and fit the cell's outer cylinder (its axis becomes z).
+    pycolmap, scale to the design and fit the cell's outer cylinder (its axis becomes z); pose the
+    cameras that see too few wall targets through the wall from the pedestal CTs and membrane
+    dots (against the nominal cell when none sees the wall); leave out, with the reason, the
+    cameras that cannot be posed.
     """
     input:
         calibrations=get_calibrations,
@@ -26,6 +29,7 @@ rule reconstruct_cell:
         runtime=10,
     params:
         reconstruction=config["reconstruction"],
+        cell=config["cell"],
     script:
         "../scripts/reconstruct_cell.py"
 

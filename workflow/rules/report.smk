@@ -15,13 +15,15 @@
 
 rule report_figures:
     """Volume and strains against time, local strain maps at a few times, reprojection error
-    per camera and tracking losses of one test, as PNG figures for the report.
+    per camera, tracking losses and footage quality per camera of one test, as PNG figures for
+    the report.
     """
     input:
         volume="results/{test}/volume.parquet",
         strains="results/{test}/strains.parquet",
         quality="results/{test}/quality.json",
         tracking="results/{test}/tracking.parquet",
+        labels="results/{test}/labels.parquet",
     output:
         volume_strain=report(
             "results/{test}/report/volume_strain.png",
@@ -46,6 +48,12 @@ rule report_figures:
             caption="../report/tracking.rst",
             category="{test}",
             subcategory="5 tracking",
+        ),
+        cameras=report(
+            "results/{test}/report/cameras.png",
+            caption="../report/cameras.rst",
+            category="{test}",
+            subcategory="6 footage per camera",
         ),
     log:
         "logs/{test}/report_figures.log",

@@ -52,6 +52,8 @@ quality["cell"]["wavelength_nm"] = given["wavelength_nm"] or design["cell"].get(
 quality["cell"]["temperature_c"] = given["temperature_c"] or design["cell"].get("temperature_c")
 quality["cell"]["axis_tilt_deg"] = cell_doc["cell"]["axis_tilt_deg"]
 quality["cell"]["cylinder_rms_mm"] = cell_doc["cell"]["cylinder_rms_mm"]
+quality["cell"]["source"] = cell_doc["cell"].get("source", "cell_wall")
+quality["cameras_posed"] = cell_doc.get("cameras_posed", {})
 quality["cameras_dropped"] = cell_doc["cameras_dropped"]
 
 with open(snakemake.output.cameras, "w") as f:
