@@ -1,0 +1,191 @@
+"""The cell wall's dots: annular and longitudinal stripes, and the bands that hide the membrane.
+
+* **Cell annular stripes.** The larger dot under cell CT ``c`` has ID ``4 c - 243`` (Eq. 1). Its
+  position is predicted from the CT by the designed offset (``dot_offset`` mm down the cell),
+  through the CT's local affine map (from its centre dot's ellipse and the direction to its
+  neighbouring CTs), then refined to the nearest detected dot. It must be larger than the dots
+  beside it. The smaller dots between two larger dots are found by 1-D linear interpolation;
+  beyond the last larger dot in view, the stripe is followed dot by dot (extrapolating from
+  the last three).
+* **Longitudinal stripes.** The uppermost and lowermost dots are predicted from the CTs directly
+  above and below them (the CT and its Eq. 1 dot fix the local vertical in the image), and the
+  dots between are followed and interpolated along the stripe.
+* **Bands.** A longitudinal stripe's white band hides the membrane behind it
+  (:func:`_hide_behind_band`); a stripe whose CT is not seen is found as a straight line of dots
+  on a brighter surface (:func:`_on_another_surface`, :func:`_straight_chains`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from triaxtrack.identify.coded import _theta_dir
+from triaxtrack.identify.grid import WHITE_TOLERANCE, _Pool, grow_chain, local_affine
+from triaxtrack.identify.state import UNLABELLED, IdentifyParams, _assign, _Frame
+from triaxtrack.kit import eq1_dot_id
+
+
+def _label_cell_stripes(f: _Frame, pool: _Pool, centres: dict, design: dict, p: IdentifyParams) -> None:
+    cell = design["cell_targets"]
+    per, offset = cell["dots_per_ct"], cell["dot_offset"]
+    rc = design["coded_target"]["centre_radius"]
+    r_out = design["cell"]["outer_radius"]
+    ct_stripes = {s["name"]: s for s in cell["ct_stripes"]}
+    area = f.blobs.area_px.to_numpy()
+    for ds in cell["dot_stripes"]:
+        cs = ct_stripes[ds["ct_stripe"]]
+        n = ds["count"]
+        spacing_mm = 2 * np.pi * r_out / n
+        anchors, hints = {}, {}
+        for c in range(cs["first_id"], cs["first_id"] + cs["count"]):
+            if c not in centres:
+                continue
+            d = _theta_dir(c, cs["first_id"], cs["count"], centres)
+            if d is None:
+                continue
+            centre, m = centres[c]
+            a = local_affine(m, d, rc)
+            pred = centre + a @ np.array([0.0, -offset])
+            step = a @ np.array([spacing_mm, 0.0])
+            k = pool.unique_within(pred, p.anchor_gate * np.linalg.norm(step))
+            if k < 0:
+                continue
+            # Eq. 1's dot is the larger one: larger than every other dot around it
+            near = [j for j in pool.tree.query_ball_point(pool.pos[k], 1.3 * np.linalg.norm(step)) if j != k]
+            if near and area[k] < p.large_area_ratio * area[near].max():
+                continue
+            i = per * (c - cs["first_id"])
+            anchors[i] = k
+            hints[i] = step  # to i + 1, and (evenly spaced) into i from i - 1
+            hints.setdefault((i - 1) % n, step)
+            pool.free[k] = False
+        labels = grow_chain(pool, anchors, n, cyclic=True, gate=p.gate, step_hint=hints)
+        for i, k in labels.items():
+            _assign(f, k, ds["first_id"] + i, ds["name"], 1.0 if i in anchors else 0.9)
+
+
+def _label_longitudinal(f: _Frame, pool: _Pool, centres: dict, design: dict, p: IdentifyParams) -> None:
+    cell = design["cell_targets"]
+    offset = cell["dot_offset"]
+    zt, zb = cell["longitudinal_z_top"], cell["longitudinal_z_bottom"]
+    labelled = {int(t): k for k, t in enumerate(f.ids) if t != UNLABELLED}
+    top, bottom = cell["ct_stripes"][0], cell["ct_stripes"][-1]
+    for ls in cell["longitudinal_stripes"]:
+        n = ls["count"]
+        spacing_mm = (zt - zb) / (n - 1)
+        anchors, hints = {}, {}
+        ct_top = ls["ct"]
+        ct_bottom = ct_top - top["first_id"] + bottom["first_id"]
+        for ct_id, ct_z, index, z in (
+            (ct_top, top["z"], 0, zt),
+            (ct_bottom, bottom["z"], n - 1, zb),
+        ):
+            dot = labelled.get(eq1_dot_id(ct_id, design))
+            if dot is None:
+                continue
+            if ct_id in centres:
+                down = (f.pos[dot] - centres[ct_id][0]) / offset  # pixels per mm down the cell
+            else:  # a CT seen too obliquely to decode: the direction down from its neighbour's
+                down = _neighbour_down(f, ct_id, centres, labelled, design)
+                if down is None:
+                    continue
+            pred = f.pos[dot] + down * (ct_z - offset - z)
+            k = pool.unique_within(pred, p.anchor_gate * spacing_mm * np.linalg.norm(down))
+            if k < 0:
+                continue
+            anchors[index] = k
+            # the step from index to index + 1 (grow_chain's convention), so from the bottom
+            # anchor it is the step into it: the walk goes up from there
+            hints[index if index == 0 else index - 1] = down * spacing_mm
+            pool.free[k] = False
+        labels = grow_chain(pool, anchors, n, cyclic=False, gate=p.gate, step_hint=hints, max_bracket=2)
+        for i, k in labels.items():
+            _assign(f, k, ls["first_id"] + i, ls["name"], 1.0 if i in anchors else 0.9)
+
+
+def _neighbour_down(f: _Frame, ct_id: int, centres: dict, labelled: dict, design: dict) -> np.ndarray | None:
+    """Pixels per mm down the cell at CT ``ct_id`` (not decoded) from the nearest decoded CT of
+    its stripe (one or two places along, the nearer first) whose Eq. 1 dot is labelled."""
+    stripe = next(s for s in design["cell_targets"]["ct_stripes"] if 0 <= ct_id - s["first_id"] < s["count"])
+    for step in (1, -1, 2, -2):
+        nb = stripe["first_id"] + (ct_id - stripe["first_id"] + step) % stripe["count"]
+        dot = labelled.get(eq1_dot_id(nb, design))
+        if nb in centres and dot is not None:
+            return (f.pos[dot] - centres[nb][0]) / design["cell_targets"]["dot_offset"]
+    return None
+
+
+def _hide_behind_band(f: _Frame, pool: _Pool, order: np.ndarray, pad: np.ndarray, design: dict) -> None:
+    """Take out of the pool (reason given) the free dots whose image reaches the white band of
+    a longitudinal stripe whose dots, in order along it, are ``order`` (blob indices): within
+    half the band's width of the line through them plus ``pad`` (per blob, pixels)."""
+    line = f.pos[order]
+    # pixels per mm across the band at each stripe dot: its minor axis (the band is
+    # foreshortened across, towards a silhouette, never along)
+    across = f.blobs.minor_px.to_numpy()[order] / design["cell_targets"]["longitudinal_dot_diameter"]
+    half = design["cell_targets"]["longitudinal_band_width"] / 2
+    radius = half * np.maximum(across[:-1], across[1:])
+    hide = _near_polyline(f.pos, line, radius, pad) & pool.free
+    pool.free[hide] = False
+    f.reason[hide] = "on a longitudinal stripe's band"
+
+
+MIN_CHAIN_DOTS = 8  # a straight line of at least this many dots on another surface is a stripe
+CHAIN_LINE_PX = 1.0  # ... within this of a straight line (undistorted pixels: a generatrix of the
+# cell images straight)
+CHAIN_AXIS_DEG = 15.0  # a stripe runs along the specimen's axis (tilted cameras, distortion)
+
+
+def _straight_chains(pos: np.ndarray, cand: np.ndarray, axis: np.ndarray) -> list[np.ndarray]:
+    """Longitudinal stripes among the blobs ``cand`` (indices; ``pos`` undistorted pixels): each
+    a straight line of at least ``MIN_CHAIN_DOTS`` of them (RANSAC) along the specimen's axis
+    (``axis``: its image direction, within ``CHAIN_AXIS_DEG``), its blobs in order along it."""
+    from skimage.measure import LineModelND, ransac
+
+    left = np.asarray(cand, np.int64)
+    out = []
+    while len(left) >= MIN_CHAIN_DOTS:
+        model, inl = ransac(pos[left], LineModelND, min_samples=2, residual_threshold=CHAIN_LINE_PX,
+                            max_trials=200, rng=0)  # fmt: skip
+        if model is None or inl is None or inl.sum() < MIN_CHAIN_DOTS:
+            break
+        members = left[inl]
+        left = left[~inl]
+        if abs(model.direction @ axis) < np.cos(np.deg2rad(CHAIN_AXIS_DEG)):
+            continue  # a row of a ring's dots, not a stripe
+        along = (pos[members] - model.origin) @ model.direction
+        out.append(members[np.argsort(along)])
+    return out
+
+
+def _near_polyline(
+    points: np.ndarray, line: np.ndarray, radius: np.ndarray, pad: np.ndarray | float = 0.0
+) -> np.ndarray:
+    """Points within ``radius[k] + pad`` of segment k of a polyline (``pad``: per point or one)."""
+    out = np.zeros(len(points), bool)
+    for a, b, r in zip(line[:-1], line[1:], radius, strict=True):
+        ab = b - a
+        t = np.clip(((points - a) @ ab) / max(ab @ ab, 1e-12), 0, 1)
+        out |= np.linalg.norm(points - (a + t[:, None] * ab), axis=1) < r + pad
+    return out
+
+
+SURFACE_NEIGHBOURS = 8  # free dots around a dot whose white level is the surface's
+
+
+def _on_another_surface(pool: _Pool) -> np.ndarray:
+    """Which free dots lie on a surface whose white level differs by more than
+    ``WHITE_TOLERANCE`` from the median of their ``SURFACE_NEIGHBOURS`` nearest free dots' (a
+    stripe's white band in front of the grey membrane, a strap across it); the white level
+    follows uneven light smoothly, a printed surface's edge does not."""
+    free = np.nonzero(pool.free)[0]
+    out = np.zeros(len(pool.free), bool)
+    if len(free) <= SURFACE_NEIGHBOURS:
+        return out
+    tree = cKDTree(pool.pos[free])
+    _, nb = tree.query(pool.pos[free], k=SURFACE_NEIGHBOURS + 1)
+    white = pool.white[free]
+    ratio = white / np.median(white[nb[:, 1:]], axis=1)
+    out[free] = np.abs(ratio - 1) > WHITE_TOLERANCE
+    return out

@@ -1,0 +1,87 @@
+"""Coded targets (CTs) as identification sees them: their centres and centre-dot ellipse maps in
+undistorted pixels, the blobs on their labels, the CT stripes of the design, the decoded CTs
+whose place in the image agrees with their ID, and the image direction of +theta at a CT."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+from scipy.spatial import cKDTree
+
+from triaxtrack.detect import ellipse_maps
+from triaxtrack.identify.grid import undistorted_jacobians
+from triaxtrack.identify.state import _Frame
+
+
+def _ct_maps(f: _Frame, cts: pd.DataFrame, undistort) -> dict[int, tuple[np.ndarray, np.ndarray]]:
+    """CT id -> (undistorted centre, centre-dot ellipse map in undistorted pixels)."""
+    if cts.empty:
+        return {}
+    rows = cts.blob.to_numpy()
+    maps = ellipse_maps(f.blobs.loc[rows])
+    jac = undistorted_jacobians(undistort, f.blobs.loc[rows, ["u_px", "v_px"]].to_numpy())
+    maps_u = np.einsum("nij,njk->nik", jac, maps)
+    return {int(t): (f.pos[b], m) for t, b, m in zip(cts.id, rows, maps_u, strict=True)}
+
+
+def _inside_cts(f: _Frame, cts: pd.DataFrame, ct_design: dict) -> np.ndarray:
+    """Blobs that belong to a CT (its centre dot, code sectors, or anything on its label)."""
+    inside = np.zeros(len(f.blobs), bool)
+    if cts.empty:
+        return inside
+    extent = ct_design.get("label_radius", ct_design["ring_outer_radius"] + 1.2) / ct_design["centre_radius"]
+    maps = ellipse_maps(f.blobs.loc[cts.blob.to_numpy()])
+    uv = f.blobs[["u_px", "v_px"]].to_numpy()
+    tree = cKDTree(uv)
+    for (cu, cv), m in zip(cts[["u_px", "v_px"]].to_numpy(), maps, strict=True):
+        near = tree.query_ball_point((cu, cv), extent * np.linalg.norm(m, 2))
+        if near:
+            local = np.linalg.solve(m, (uv[near] - (cu, cv)).T).T
+            inside[np.asarray(near)[np.linalg.norm(local, axis=1) < extent]] = True
+    return inside
+
+
+def _ct_stripes(design: dict) -> dict[int, tuple[str, int, int]]:
+    """CT id -> (stripe name, first id, count) for every CT stripe of the design."""
+    out = {}
+    stripes = design["pedestal_targets"]["stripes"] + design["cell_targets"]["ct_stripes"]
+    for st in stripes:
+        for i in range(st["count"]):
+            out[st["first_id"] + i] = (st["name"], st["first_id"], st["count"])
+    return out
+
+
+def _plausible_cts(cts: pd.DataFrame, design: dict) -> pd.DataFrame:
+    """Drop CTs whose place in the image contradicts their ID: among a CT's two nearest decoded
+    CTs there must be one of its own stripe whose ID is at most two steps away (a misread
+    partly hidden target decodes to a valid but far-away code)."""
+    if len(cts) < 3:
+        return cts
+    stripes = _ct_stripes(design)
+    uv = cts[["u_px", "v_px"]].to_numpy()
+    ids = cts.id.to_numpy()
+    _, near = cKDTree(uv).query(uv, k=3)
+    keep = np.zeros(len(cts), bool)
+    for a in range(len(cts)):
+        name, first, count = stripes[int(ids[a])]
+        for b in near[a, 1:]:
+            nb, _, _ = stripes[int(ids[b])]
+            steps = (int(ids[b]) - int(ids[a])) % count
+            if nb == name and min(steps, count - steps) <= 2:
+                keep[a] = True
+    return cts[keep].reset_index(drop=True)
+
+
+def _theta_dir(ct_id: int, first: int, count: int, centres: dict) -> np.ndarray | None:
+    """Image direction of +theta at a CT, from its decoded neighbours in the same stripe."""
+    nxt = first + (ct_id - first + 1) % count
+    prv = first + (ct_id - first - 1) % count
+    if nxt in centres and prv in centres:
+        d = centres[nxt][0] - centres[prv][0]
+    elif nxt in centres:
+        d = centres[nxt][0] - centres[ct_id][0]
+    elif prv in centres:
+        d = centres[ct_id][0] - centres[prv][0]
+    else:
+        return None
+    return d / np.linalg.norm(d)

@@ -1,0 +1,233 @@
+"""One frame's identification (:func:`identify`, the steps in order, then the accuracy filters),
+detection and identification of a grey frame (:func:`label_frame`), the chunk start's labels
+(:func:`label_chunk_start`) and a picture of them for a person to check (:func:`draw_labels`).
+The method is described in :mod:`triaxtrack.identify`."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from triaxtrack.identify.anchors import _axis_down, _pedestal_anchors
+from triaxtrack.identify.cell import (
+    _hide_behind_band,
+    _label_cell_stripes,
+    _label_longitudinal,
+    _on_another_surface,
+    _straight_chains,
+)
+from triaxtrack.identify.coded import _ct_maps, _inside_cts, _plausible_cts
+from triaxtrack.identify.grid import _Pool
+from triaxtrack.identify.membrane import _is_membrane, _label_membrane, _membrane_row_ends, _over_neighbours
+from triaxtrack.identify.merged import _recentred_beside_edge, _split_merged_pairs
+from triaxtrack.identify.state import LABEL_COLUMNS, NOT_REACHED, UNLABELLED, IdentifyParams, _Frame
+
+# a membrane dot beside a dark edge this much less round than its grid neighbours (seen at the
+# same angle) has merged with the edge's fringe: on the demo one at 0.52 was 1.4 px off; 0.45 %
+# of all labelled membrane dots on four tests fall below it, beside an edge or not
+MERGED_ROUNDNESS_RATIO = 0.55
+# an end-row membrane dot beside a pedestal's edge and a gap in its row this much larger than its
+# grid neighbours has merged with the edge: of 869 on four tests, 99 % were under 1.33 and at
+# most 0.39 px off; the largest (1.8) was 0.93 px off
+MERGED_AREA_RATIO = 1.5
+FAR_PX = 1e9
+# a membrane dot whose image comes within this of a longitudinal band's (beyond its moment
+# ellipse, where its blurred edge still darkens pixels) may be partly hidden: not labelled. At
+# 0.5 px the dots kept beside a band were as accurate as the rest on four tests (membrane p99.9
+# and maximum error unchanged); 1.0 px left 80-175 more a test unlabelled
+BAND_BLUR_PX = 0.5
+BLUR_REACH = 2.0  # a blurred edge darkens pixels this many lens-blur sigmas beyond it
+
+
+def identify(
+    blobs: pd.DataFrame,
+    cts: pd.DataFrame,
+    design: dict,
+    undistort,
+    dots: np.ndarray,
+    params: IdentifyParams | None = None,
+    gray: np.ndarray | None = None,
+    detect_params=None,
+) -> pd.DataFrame:
+    """Label one frame's detections (see the module docstring).
+
+    ``blobs``/``cts``: from :func:`triaxtrack.detect.detect_blobs` and
+    :func:`~triaxtrack.detect.decode_coded_targets`; ``dots``: the blobs that pass the dot
+    criteria (:func:`~triaxtrack.detect.dot_mask`); ``undistort``: (N, 2) distorted pixels ->
+    undistorted pixels; ``gray``: the frame, if given, re-centres the longitudinal stripes' dots
+    beside a dark edge (:func:`~triaxtrack.detect.gap_background_centroids`) and fits membrane
+    dots merged in pairs apart (:func:`_split_merged_pairs`, with ``detect_params``' ink rule).
+    Returns one row per CT and per dot (columns ``LABEL_COLUMNS``), ``id`` -1 with a ``reason``
+    where the dot could not be labelled beyond doubt; a merged pair's two dots have a row each.
+    """
+    p = params or IdentifyParams()
+    blur_px = float(blobs.blur.iloc[0]) if "blur" in blobs and len(blobs) else 0.0
+    uv = blobs[["u_px", "v_px"]].to_numpy(np.float64, copy=True)
+    pos = undistort(uv) if len(uv) else uv.copy()
+    invertible = np.isfinite(pos).all(axis=1)
+    pos = np.where(invertible[:, None], pos, FAR_PX)  # beyond the lens model: never a candidate
+    n = len(blobs)
+    f = _Frame(
+        blobs=blobs,
+        pos=pos,
+        ids=np.full(n, UNLABELLED, np.int64),
+        group=np.full(n, "", object),
+        quality=np.zeros(n),
+        reason=np.full(n, NOT_REACHED, object),
+    )
+    in_ct = _inside_cts(f, cts, design["coded_target"])
+    cts = _plausible_cts(cts, design)
+    candidates = np.asarray(dots, bool) & ~in_ct & invertible
+    centres = _ct_maps(f, cts, undistort)
+    pool = _Pool(pos, candidates, blobs)
+    _label_cell_stripes(f, pool, centres, design, p)
+    _label_longitudinal(f, pool, centres, design, p)
+    # the white band of a longitudinal stripe hides the membrane behind it: a dot whose image
+    # reaches the band's (half its major axis and BAND_BLUR_PX from it) is partly hidden and its
+    # centroid is biased, so drop what remains there
+    long_names = {s["name"] for s in design["cell_targets"]["longitudinal_stripes"]}
+    # the band's blurred edge reaches two lens-blur sigmas beyond its printed edge
+    pad = blobs.major_px.to_numpy() / 2 + max(BAND_BLUR_PX, BLUR_REACH * blur_px)
+    for sel in (np.nonzero(f.group == nm)[0] for nm in long_names):
+        if len(sel) >= 2:
+            _hide_behind_band(f, pool, sel[np.argsort(f.ids[sel])], pad, design)
+    # a stripe whose coded target is out of the picture is a straight line of free dots on a
+    # white band in front of the membrane: never membrane dots, and its band hides the membrane
+    axis = _axis_down(_pedestal_anchors(centres, design))
+    for order in _straight_chains(pos, np.nonzero(_on_another_surface(pool))[0], axis):
+        pool.free[order] = False
+        f.reason[order] = "on a longitudinal stripe not identified (its coded target not seen)"
+        _hide_behind_band(f, pool, order, pad, design)
+    _label_membrane(f, pool, centres, design, p)
+    # a dot too small or seen too obliquely for its place (see IdentifyParams: cell-wall dots
+    # beside a dark edge need more) has no accurate centroid: not reported; nor has the last dot
+    # of a membrane row beside a dark edge (a silhouette, a pedestal edge), whose blob takes in
+    # the edge's fringe (up to 1.4 px off on the demo), while the end rows along the pedestal
+    # faces keep theirs, also beside a gap where one of their dots was lost to the pedestal's
+    # edge (on four tests 0.17 px at the 95th percentile; the one bad dot, 0.93 px off, had
+    # taken in the edge: 1.8 times its neighbours' area)
+    m = design["membrane"]
+    membrane = _is_membrane(f.ids, m)
+    edge = blobs.beside_edge.to_numpy(bool, copy=True)
+    recentred = np.zeros(n, bool)
+    if gray is not None:
+        # a longitudinal stripe seen edge-on lies along the dark beyond its band: its dots'
+        # centroids, re-measured against the gaps' background, are as good as those clear of it
+        k, new = _recentred_beside_edge(f, uv, edge, gray, long_names)
+        new_pos = undistort(new) if len(k) else new
+        ok = np.isfinite(new_pos).all(axis=1)
+        k, new, new_pos = k[ok], new[ok], new_pos[ok]
+        uv[k], pos[k], edge[k], recentred[k] = new, new_pos, False, True
+    cell_area = np.where(edge, p.min_cell_area_px, p.min_clear_cell_area_px)
+    cell_round = np.where(edge, p.min_cell_roundness, p.min_clear_cell_roundness)
+    cell_round = np.where(recentred, p.min_recentred_roundness, cell_round)
+    row_end, row_gap = _membrane_row_ends(f.ids, m)
+    for bad, why in (
+        (blobs.area_px.to_numpy() < np.where(membrane, p.min_membrane_area_px, cell_area),
+         "too small for an accurate centroid"),
+        (blobs.roundness.to_numpy() < np.where(membrane, p.min_membrane_roundness, cell_round),
+         "seen too obliquely for an accurate centroid"),
+        (row_end & ~row_gap & edge,
+         "last of its membrane row, beside a dark edge"),
+        (row_gap & edge & (_over_neighbours(f.ids, blobs.area_px.to_numpy(), m) > MERGED_AREA_RATIO),
+         "larger than its neighbours beside a dark edge and a gap in its row (merged with the edge)"),
+        ((_over_neighbours(f.ids, blobs.roundness.to_numpy(), m) < MERGED_ROUNDNESS_RATIO) & edge,
+         "less round than its neighbours, beside a dark edge (merged with the edge's fringe)"),
+    ):  # fmt: skip
+        bad &= f.ids != UNLABELLED
+        f.ids[bad] = UNLABELLED
+        f.reason[bad] = why
+    split = pd.DataFrame(columns=LABEL_COLUMNS)
+    if gray is not None:
+        # a blob nothing labelled or turned down (not by a band, a filter), clear of a dark edge
+        free = ~in_ct & invertible & ~edge & (f.reason == NOT_REACHED)
+        split = _split_merged_pairs(f, uv, gray, free, m, p, detect_params)
+        und = undistort(split[["u_px", "v_px"]].to_numpy(np.float64)) if len(split) else np.zeros((0, 2))
+        split = split.assign(u_undist_px=und[:, 0], v_undist_px=und[:, 1])
+        split = split[np.isfinite(und).all(axis=1)]
+    ct_rows = pd.DataFrame({
+        "id": cts.id.to_numpy(np.int64), "kind": "coded", "group": "coded",
+        "u_px": cts.u_px.to_numpy(), "v_px": cts.v_px.to_numpy(),
+        "u_undist_px": pos[cts.blob.to_numpy(), 0] if len(cts) else [],
+        "v_undist_px": pos[cts.blob.to_numpy(), 1] if len(cts) else [],
+        "area_px": blobs.area_px.to_numpy()[cts.blob.to_numpy()] if len(cts) else [],
+        "roundness": blobs.roundness.to_numpy()[cts.blob.to_numpy()] if len(cts) else [],
+        "quality": cts.confidence.to_numpy(), "reason": "",
+    })  # fmt: skip
+    sel = np.nonzero(candidates)[0]
+    dot_rows = pd.DataFrame({
+        "id": f.ids[sel], "kind": "dot", "group": f.group[sel],
+        "u_px": uv[sel, 0], "v_px": uv[sel, 1], "u_undist_px": pos[sel, 0], "v_undist_px": pos[sel, 1],
+        "area_px": blobs.area_px.to_numpy()[sel], "roundness": blobs.roundness.to_numpy()[sel],
+        "quality": f.quality[sel], "reason": f.reason[sel],
+    })  # fmt: skip
+    parts = [ct_rows, dot_rows] + ([split[LABEL_COLUMNS].astype(dot_rows.dtypes)] if len(split) else [])
+    return pd.concat(parts, ignore_index=True)[LABEL_COLUMNS]
+
+
+def undistorted_pixels(camera) -> callable:
+    """(N, 2) distorted pixels -> undistorted pixels of ``camera`` (NaN where not invertible)."""
+    from functools import partial
+
+    from triaxtrack.optics import pixels_to_undistorted
+
+    return partial(pixels_to_undistorted, camera)
+
+
+def label_frame(gray: np.ndarray, camera, design: dict, codes: dict[int, int], detect_params=None,
+                identify_params: IdentifyParams | None = None) -> pd.DataFrame:  # fmt: skip
+    """Detect and identify every target in one grey frame of a calibrated ``camera``
+    (:class:`triaxtrack.optics.Camera`, intrinsics used). Columns ``LABEL_COLUMNS``."""
+    from triaxtrack.detect import decode_coded_targets, detect_blobs, dot_mask
+
+    blobs = detect_blobs(gray, detect_params)
+    cts = decode_coded_targets(gray, blobs, codes, design["coded_target"], detect_params)
+    return identify(blobs, cts, design, undistorted_pixels(camera), dot_mask(blobs, detect_params),
+                    identify_params, gray=gray, detect_params=detect_params)  # fmt: skip
+
+
+def draw_labels(gray: np.ndarray, labels: pd.DataFrame, scale: int = 2) -> np.ndarray:
+    """A BGR picture of the frame with every labelled target's ID, for a person to check.
+
+    Green: CTs (ID printed); cyan: cell dots; yellow: membrane dots (ID printed on the larger
+    ones and every tenth); red crosses: detections left unlabelled.
+    """
+    import cv2
+
+    img = cv2.cvtColor(np.asarray(gray, np.uint8), cv2.COLOR_GRAY2BGR)
+    img = cv2.resize(img, None, fx=scale, fy=scale, interpolation=cv2.INTER_LINEAR)
+    font = cv2.FONT_HERSHEY_SIMPLEX
+    for r in labels.itertuples(index=False):
+        c = (int(round((r.u_px + 0.5) * scale - 0.5)), int(round((r.v_px + 0.5) * scale - 0.5)))
+        if r.id == UNLABELLED:
+            cv2.drawMarker(img, c, (0, 0, 255), cv2.MARKER_TILTED_CROSS, 3 * scale, 1)
+            continue
+        if r.kind == "coded":
+            colour, text = (0, 220, 0), str(r.id)
+        elif str(r.group).startswith("membrane"):
+            colour, text = (0, 220, 220), str(r.id) if r.id % 10 == 0 else ""
+        else:
+            colour, text = (220, 220, 0), str(r.id) if r.id % 4 == 1 else ""
+        cv2.circle(img, c, 2 * scale, colour, 1, cv2.LINE_AA)
+        if text:
+            cv2.putText(
+                img, text, (c[0] + 3 * scale, c[1] - 2 * scale), font, 0.3 * scale, colour, 1, cv2.LINE_AA
+            )
+    return img
+
+
+def label_chunk_start(
+    video_path, fmap: pd.DataFrame, camera, design: dict, codes: dict[int, int], start: int, stop: int
+) -> tuple[int | None, np.ndarray | None, pd.DataFrame]:
+    """Label the first frame of the chunk ``[start, stop)`` that the camera recorded.
+
+    Returns ``(frame, image, labels)``; ``frame`` is None (and ``labels`` empty) when the camera
+    recorded none of the chunk's frames. ``labels`` carries ``camera`` and ``frame`` columns.
+    """
+    from triaxtrack.frames import iter_test_frames
+
+    for k, image in iter_test_frames(video_path, fmap, start, stop):
+        if image is not None:
+            labels = label_frame(image, camera, design, codes)
+            return k, image, labels.assign(camera=camera.name, frame=k)
+    return None, None, pd.DataFrame(columns=["camera", "frame", *LABEL_COLUMNS])

@@ -1,0 +1,267 @@
+"""The membrane's dot grid: regions grown from the pedestal CTs, their IDs, and the grid-neighbour
+checks on membrane IDs.
+
+From each pedestal CT pair (top CT C, bottom CT C + 16) a seed dot near the pair's line starts a
+2-D walk of the grid (:func:`~triaxtrack.identify.grid.grow_grid`): each next dot is predicted
+from its labelled grid neighbours (straight continuation and parallelograms) and accepted only
+when exactly one detected dot lies within the gate. The larger dots (every fourth row and
+column, Eqs. 2-3) give the grid's phase by their area (:func:`_grid_phase`); the pedestal CTs
+give the column and row offsets (:mod:`~triaxtrack.identify.anchors`). ID = (r - 1) * 64 + c +
+1000 (Eq. 4). A region no pedestal CT fixes (beyond a longitudinal stripe's band) is fixed across
+the band from a fixed neighbour (:func:`_bridge`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from triaxtrack.identify.anchors import _axis_down, _membrane_region_offsets, _MembraneView, _pedestal_anchors
+from triaxtrack.identify.grid import NEIGHBOURS, _grow_region, _Pool, ellipse_radius
+from triaxtrack.identify.state import IdentifyParams, _assign, _Frame
+
+
+def _grid_phase(grid: dict, area: np.ndarray, p: IdentifyParams) -> tuple[int, int] | None:
+    """(row, col) residues mod 4 of the larger dots, from each dot's area over its neighbours'."""
+    la = {node: np.log(area[k]) for node, k in grid.items()}
+    sums = np.zeros((4, 4))
+    counts = np.zeros((4, 4))
+    for (i, j), v in la.items():
+        # only opposite neighbours in pairs: the dots' size changes across the image (towards a
+        # silhouette, along the axis) and a pair's mean cancels that change to first order
+        nb = [
+            0.5 * (la[(i - di, j - dj)] + la[(i + di, j + dj)])
+            for di, dj in ((1, 0), (0, 1))
+            if (i - di, j - dj) in la and (i + di, j + dj) in la
+        ]
+        if nb:
+            sums[i % 4, j % 4] += v - np.mean(nb)
+            counts[i % 4, j % 4] += 1
+    mean = np.where(counts > 0, sums / np.maximum(counts, 1), -np.inf)
+    order = np.argsort(mean.ravel())[::-1]
+    best, second = mean.ravel()[order[0]], mean.ravel()[order[1]]
+    if counts.ravel()[order[0]] < 3 or best - second < p.phase_margin:
+        return None
+    return int(order[0] // 4), int(order[0] % 4)
+
+
+def _label_membrane(f: _Frame, pool: _Pool, centres: dict, design: dict, p: IdentifyParams) -> None:
+    rc = design["coded_target"]["centre_radius"]
+    anchors = _pedestal_anchors(centres, design)
+    axis = _axis_down(anchors)
+    area = f.blobs.area_px.to_numpy()
+    regions = []
+    z_from_face = design["pedestal_targets"]["stripes"][0]["z_from_face"]
+    for an in anchors:
+        if an.top is not None and an.bottom is not None:
+            down = an.bottom[0] - an.top[0]
+            down /= np.linalg.norm(down)
+            start_at = 0.5 * (an.top[0] + an.bottom[0])
+        else:
+            centre, mp = an.top or an.bottom
+            sign = 1.0 if an.top is not None else -1.0
+            down = axis
+            # a point on the membrane a quarter of its height from the CT's pedestal face
+            depth_mm = design["specimen"]["height"] / 4 + z_from_face
+            start_at = centre + sign * down * depth_mm * ellipse_radius(mp[None], down[None])[0] / rc
+        _, start = pool.tree.query(start_at)
+        regions += _grow_region(pool, int(start), down, p.gate)
+    # then the dots no pedestal CT led to (beyond a longitudinal stripe's band): their regions
+    # are fixed across the band below. Strips two columns wide are seeded last, from what the
+    # wider regions left
+    tops = [a.top[0] @ axis for a in anchors if a.top is not None]
+    bottoms = [a.bottom[0] @ axis for a in anchors if a.bottom is not None]
+    if tops and bottoms:
+        s = f.pos @ axis
+        for narrow in (False, True):
+            for k in np.nonzero(pool.free & (s > np.mean(tops)) & (s < np.mean(bottoms)))[0]:
+                regions += _grow_region(pool, int(k), axis, p.gate, narrow)
+    ctx = _MembraneView.of(regions, anchors, axis, f.pos, design)
+    phases = [_grid_phase(g, area, p) if len(g) >= p.min_region_dots else None for g in regions]
+    fixed: dict[int, tuple[int, int]] = {}
+    reasons: dict[int, str] = {}
+    for ri, grid in enumerate(regions):
+        res = _membrane_region_offsets(grid, phases[ri], anchors, f.pos, design, p, ctx)
+        if isinstance(res, str):
+            reasons[ri] = res
+        else:
+            fixed[ri] = res
+    # a region with no pedestal CT of its own (beyond a longitudinal stripe's band, towards a
+    # silhouette) is fixed across the band from a fixed neighbour, where the phase of the larger
+    # dots leaves exactly one choice
+    changed = True
+    while changed:
+        changed = False
+        for ri in [r for r in reasons if phases[r] is not None]:
+            for rj, off in list(fixed.items()):
+                res = _bridge(regions[ri], phases[ri], regions[rj], off, f.pos, axis, design)
+                if res is not None:
+                    fixed[ri] = res
+                    del reasons[ri]
+                    changed = True
+                    break
+    for ri, grid in enumerate(regions):
+        name = f"membrane_region_{ri}"
+        if ri in reasons:
+            f.reason[np.fromiter(grid.values(), int)] = reasons[ri]
+            continue
+        ids = _grid_ids(grid, *fixed[ri], design["membrane"])
+        for node, k in grid.items():
+            if node in ids:
+                _assign(f, k, ids[node], name, 0.9)
+            else:
+                f.reason[k] = "beyond the membrane's rows"
+
+
+def _bridge(grid, phase, other, other_off, pos, axis, design) -> tuple[int, int] | None:
+    """(column offset, row offset) of ``grid`` from a fixed neighbouring region ``other``.
+
+    Rows are matched along the specimen's axis between the two regions' facing columns; the
+    number of columns hidden between them is estimated from the gap and the columns' spacing,
+    and must be the one value within 1.5 columns of that estimate that puts this region's
+    larger dots on the design's larger columns and rows.
+    """
+    m = design["membrane"]
+    step, first = m["large_step"], m["large_first"]
+    right = np.array([axis[1], -axis[0]])
+    a_nodes = np.array(list(grid.keys()))
+    b_nodes = np.array(list(other.keys()))
+    a_xy = pos[np.fromiter(grid.values(), int)]
+    b_xy = pos[np.fromiter(other.values(), int)]
+    side = np.sign(np.median(a_xy @ right) - np.median(b_xy @ right))
+    if side == 0:
+        return None
+    # facing columns: this region's column nearest the other, and the other's nearest this one
+    a_col = {int(j): float(np.median(a_xy[a_nodes[:, 1] == j] @ right)) for j in np.unique(a_nodes[:, 1])}
+    b_col = {int(j): float(np.median(b_xy[b_nodes[:, 1] == j] @ right)) for j in np.unique(b_nodes[:, 1])}
+    # grid columns run along `right` (see _seed_grid): the facing ones are the extreme columns
+    ja = min(a_col) if side > 0 else max(a_col)
+    jb = max(b_col) if side > 0 else min(b_col)
+    ja2, jb2 = ja + int(side), jb - int(side)  # one column further in, to measure the spacing
+    if ja2 not in a_col or jb2 not in b_col:
+        return None
+    # each row's facing dot and its slope there (from the next column in), extrapolated to the
+    # middle of the gap from both sides: a row images as an arc, and extrapolating its tangent
+    # by the same distance from either side cancels the arc's curvature
+    mid = 0.5 * (a_col[ja] + b_col[jb])
+    ends_a = _row_ends(grid, pos, ja, ja2, axis, right, mid)
+    ends_b = _row_ends(other, pos, jb, jb2, axis, right, mid)
+    if len(ends_a) < 5 or len(ends_b) < 5:
+        return None
+    ib = np.array(list(ends_b))
+    zb = np.array([ends_b[i][0] for i in ib])
+    pitch = np.median(np.abs(np.diff(zb[np.argsort(ib)])))
+    shifts, gaps = [], []
+    for i, (z, gap_a, _) in ends_a.items():
+        k = int(np.argmin(np.abs(zb - z)))
+        if abs(zb[k] - z) < 0.35 * pitch:
+            shifts.append(int(ib[k]) - i)
+            gaps.append(gap_a + ends_b[int(ib[k])][1])
+    if len(shifts) < 5:
+        return None
+    values, counts = np.unique(shifts, return_counts=True)
+    if counts.max() < 0.8 * len(shifts):
+        return None
+    di = int(values[np.argmax(counts)])
+    # the columns' spacing row by row (a column's median across a curved strip is not its place)
+    spacing = 0.5 * sum(float(np.median([e[2] for e in ends.values()])) for ends in (ends_a, ends_b))
+    n_est = float(np.median(gaps)) / spacing  # columns from jb to ja
+    c_off_b, r_off_b = other_off
+    r_off = r_off_b + di
+    pi, pj = phase
+    if (pi + r_off - first) % step:
+        return None  # the rows across the band do not put the larger dots on larger rows
+    c_b = jb + c_off_b  # column number (unwrapped) of the other's facing column
+    fits = [
+        n for n in range(1, int(n_est) + 3)
+        if abs(n - n_est) < 1.5 and (pj + c_b + side * n - ja - first) % step == 0
+    ]  # fmt: skip
+    if len(fits) != 1:
+        return None
+    c_off = int((c_b + side * fits[0] - ja) % m["columns"])
+    return c_off, r_off
+
+
+def _row_ends(
+    grid: dict, pos: np.ndarray, j: int, j2: int, axis: np.ndarray, right: np.ndarray, mid: float
+) -> dict[int, tuple[float, float, float]]:
+    """Row -> (position along ``axis`` extrapolated to ``mid`` across it, distance across from
+    column ``j``'s dot to ``mid``, distance across from it to column ``j2``'s) for the rows with
+    dots in columns ``j`` and ``j2``."""
+    out = {}
+    for (i, jj), k in grid.items():
+        if jj != j or (i, j2) not in grid:
+            continue
+        p, q = pos[k], pos[grid[(i, j2)]]
+        dr = (p - q) @ right
+        if abs(dr) < 1e-9:
+            continue
+        slope = ((p - q) @ axis) / dr
+        out[int(i)] = (float(p @ axis + slope * (mid - p @ right)), abs(mid - p @ right), abs(dr))
+    return out
+
+
+def _grid_ids(grid: dict, c_off: int, r_off: int, m: dict) -> dict:
+    """Node -> membrane ID (Eq. 4) for a region with known offsets; nodes beyond the rows left out."""
+    out = {}
+    for i, j in grid:
+        r, c = i + r_off, (j + c_off - 1) % m["columns"] + 1
+        if 1 <= r <= m["rows"]:  # beyond: not a membrane dot (a pedestal edge fragment, ...)
+            out[(i, j)] = (r - 1) * m["columns"] + c + m["first_id"] - 1
+    return out
+
+
+def _is_membrane(ids: np.ndarray, m: dict) -> np.ndarray:
+    """Which of ``ids`` are membrane dot IDs (Eq. 4) of the design's membrane ``m``."""
+    k = np.asarray(ids, np.int64) - m["first_id"]
+    return (k >= 0) & (k < m["rows"] * m["columns"])
+
+
+def _grid_neighbour(ids: np.ndarray, m: dict, dr: int, dc: int) -> np.ndarray:
+    """The membrane ID ``dr`` rows and ``dc`` columns (around the specimen) from each of ``ids``
+    (membrane IDs); 0 beyond the end rows."""
+    k = np.asarray(ids, np.int64) - m["first_id"]
+    row, col = k // m["columns"] + dr, (k % m["columns"] + dc) % m["columns"]
+    return np.where((row >= 0) & (row < m["rows"]), row * m["columns"] + col + m["first_id"], 0)
+
+
+def _over_neighbours(ids: np.ndarray, values: np.ndarray, m: dict) -> np.ndarray:
+    """Each membrane dot's value (roundness, area) over the median of its labelled grid
+    neighbours' (row and column, around the specimen); NaN where it has none or is not a
+    membrane dot."""
+    ids = np.asarray(ids, np.int64)
+    values = np.asarray(values, np.float64)
+    member = _is_membrane(ids, m)
+    of = pd.Series(values[member], index=ids[member])
+    of = of[~of.index.duplicated()]
+    out = np.full(len(ids), np.nan)
+    if member.any():
+        nb = np.stack(
+            [of.reindex(_grid_neighbour(ids[member], m, dr, dc)).to_numpy() for dr, dc in NEIGHBOURS]
+        )
+        has = np.isfinite(nb).any(axis=0)
+        ratio = np.full(member.sum(), np.nan)
+        ratio[has] = values[member][has] / np.nanmedian(nb[:, has], axis=0)
+        out[member] = ratio
+    return out
+
+
+def _membrane_row_ends(ids: np.ndarray, m: dict) -> tuple[np.ndarray, np.ndarray]:
+    """Which of ``ids`` are membrane dots whose row neighbour on either side (column c - 1 or
+    c + 1, around the specimen) is not among ``ids``, and which of those are in an end row
+    (along a pedestal) with every missing neighbour's own neighbour towards the middle rows
+    among ``ids``: a gap in the row where a dot was lost, not the row's end at a silhouette."""
+    ids = np.asarray(ids, np.int64)
+    member = _is_membrane(ids, m)
+    labelled = ids[member]
+    row = (ids - m["first_id"]) // m["columns"]
+    inward = np.where(row == 0, 1, -1)
+    end_row = member & ((row == 0) | (row == m["rows"] - 1))
+    ends = np.zeros(len(ids), bool)
+    gap = end_row.copy()
+    for s in (-1, 1):
+        missing = member & ~np.isin(_grid_neighbour(ids, m, 0, s), labelled)
+        ends |= missing
+        beyond = np.where(inward > 0, _grid_neighbour(ids, m, 1, s), _grid_neighbour(ids, m, -1, s))
+        gap &= ~missing | np.isin(beyond, labelled)
+    return ends, ends & gap
