@@ -119,32 +119,6 @@ def window_levels(
     return np.broadcast_to(white[:, None, None], patch.shape), noise, noise / np.sqrt(count)
 
 
-STRUCTURE_K = 3.0  # a window's noise above this x the frame's is structure, not noise
-FRAME_NOISE_SAMPLE = 400  # windows the frame's noise is the median of
-
-
-def _frame_noise(g: np.ndarray, uv_px: np.ndarray, radius_px: np.ndarray) -> float:
-    """The frame's pixel noise: the median of :func:`window_levels`' noise over (up to
-    ``FRAME_NOISE_SAMPLE``, evenly chosen) targets' windows inside the image, grey levels."""
-    H, W = g.shape
-    if len(uv_px) == 0:
-        return QUANTISATION_NOISE
-    pick = np.unique(np.linspace(0, len(uv_px) - 1, min(len(uv_px), FRAME_NOISE_SAMPLE)).astype(int))
-    h = int(np.ceil(np.nanmax(radius_px[pick]))) + 2
-    cu = np.rint(uv_px[pick, 0]).astype(np.int64)
-    cv = np.rint(uv_px[pick, 1]).astype(np.int64)
-    inside = (cu - h >= 0) & (cv - h >= 0) & (cu + h < W) & (cv + h < H)
-    if not inside.any():
-        return QUANTISATION_NOISE
-    off = np.arange(-h, h + 1)
-    patch = g[cv[inside, None, None] + off[None, :, None], cu[inside, None, None] + off[None, None, :]]
-    xs = off[None, None, :].astype(np.float64)
-    ys = off[None, :, None].astype(np.float64)
-    annulus = xs**2 + ys**2 > ((radius_px[pick][inside] + ANNULUS_GAP_PX) ** 2)[:, None, None]
-    _, noise, _ = window_levels(patch.astype(np.float64), annulus, xs, ys)
-    return float(max(np.median(noise), QUANTISATION_NOISE))
-
-
 STRUCTURE_K = 3.0  # a window's spread above this x the frame's noise is structure, not noise
 FRAME_NOISE_SAMPLE = 400  # windows the frame's noise is the median of
 
@@ -193,7 +167,6 @@ def measure_windows(
     reason[~finite] = "lost"
     half = np.where(finite, np.ceil(np.nan_to_num(radius_px)).astype(np.int64) + 2, 0)
     frame_noise = _frame_noise(g, uv_px[finite], radius_px[finite])
-    frame_noise = _frame_noise(g, uv_px[finite], radius_px[finite])
     for h in np.unique(half[finite]):
         sel = np.nonzero(finite & (half == h))[0]
         cu = np.rint(uv_px[sel, 0]).astype(np.int64)
@@ -214,11 +187,6 @@ def measure_windows(
         # the codec flattens some windows' white (their spread reads below the noise) and the
         # dark beyond an edge fills others' (far above it): each is held to the frame's noise
         noise = np.clip(noise, frame_noise, STRUCTURE_K * frame_noise)
-        # a window whose annulus is mostly structure (the dark beyond an edge) reads a spread far
-        # above the noise: it takes the frame's noise (the median over every window)
-        structured = noise > STRUCTURE_K * frame_noise
-        noise = np.where(structured, frame_noise, noise)
-        s_white = np.where(structured, frame_noise / np.sqrt(annulus.sum(axis=(1, 2))), s_white)
         white = plane[:, h, h]  # at the window centre
         contrast = plane - patch
         level = np.maximum(INK_NOISE_K * noise[:, None, None], ink_fraction * plane)
