@@ -82,6 +82,12 @@ BLOB_COLUMNS = [
 ]  # fmt: skip
 
 
+def background_size_px(width: int, params: DetectParams | None = None) -> int:
+    """The size over which :func:`background` measures the white level in a frame ``width``
+    pixels wide (``DetectParams.background_px``, or its default ``width / 80``)."""
+    return (params or DetectParams()).background_px or max(8, int(width) // 80)
+
+
 def background(gray: np.ndarray, size_px: int) -> np.ndarray:
     """Local white level: the closing of ``gray`` by a disc of ``size_px`` (float32, same shape).
 
@@ -226,7 +232,7 @@ def detect_blobs(gray: np.ndarray, params: DetectParams | None = None) -> pd.Dat
 
 def _detect(g: np.ndarray, p: DetectParams, smooth_px: float) -> pd.DataFrame:
     """:func:`detect_blobs` at a given smoothing of the ink mask (0: none, no splitting)."""
-    size = p.background_px or max(8, g.shape[1] // 80)
+    size = background_size_px(g.shape[1], p)
     sigma = noise_sigma(g)
     gf = g.astype(np.float32)
     bg = background(cv2.GaussianBlur(gf, (0, 0), smooth_px) if smooth_px > 0 else g, size)

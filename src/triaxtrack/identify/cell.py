@@ -116,17 +116,23 @@ def _neighbour_down(f: _Frame, ct_id: int, centres: dict, labelled: dict, design
     return None
 
 
-def _hide_behind_band(f: _Frame, pool: _Pool, order: np.ndarray, pad: np.ndarray, design: dict) -> None:
-    """Take out of the pool (reason given) the free dots whose image reaches the white band of
-    a longitudinal stripe whose dots, in order along it, are ``order`` (blob indices): within
-    half the band's width of the line through them plus ``pad`` (per blob, pixels)."""
+def _band_zone(f: _Frame, order: np.ndarray, pad: np.ndarray | float, design: dict) -> np.ndarray:
+    """Which blobs lie within half the white band's width, plus ``pad`` (per blob or one,
+    pixels), of the line through a longitudinal stripe's dots ``order`` (blob indices, in
+    order along it)."""
     line = f.pos[order]
     # pixels per mm across the band at each stripe dot: its minor axis (the band is
     # foreshortened across, towards a silhouette, never along)
     across = f.blobs.minor_px.to_numpy()[order] / design["cell_targets"]["longitudinal_dot_diameter"]
     half = design["cell_targets"]["longitudinal_band_width"] / 2
-    radius = half * np.maximum(across[:-1], across[1:])
-    hide = _near_polyline(f.pos, line, radius, pad) & pool.free
+    return _near_polyline(f.pos, line, half * np.maximum(across[:-1], across[1:]), pad)
+
+
+def _hide_behind_band(f: _Frame, pool: _Pool, order: np.ndarray, pad: np.ndarray, design: dict) -> None:
+    """Take out of the pool (reason given) the free dots whose image reaches the white band of
+    a longitudinal stripe whose dots, in order along it, are ``order`` (blob indices): within
+    half the band's width of the line through them plus ``pad`` (per blob, pixels)."""
+    hide = _band_zone(f, order, pad, design) & pool.free
     pool.free[hide] = False
     f.reason[hide] = "on a longitudinal stripe's band"
 
@@ -134,13 +140,36 @@ def _hide_behind_band(f: _Frame, pool: _Pool, order: np.ndarray, pad: np.ndarray
 MIN_CHAIN_DOTS = 8  # a straight line of at least this many dots on another surface is a stripe
 CHAIN_LINE_PX = 1.0  # ... within this of a straight line (undistorted pixels: a generatrix of the
 # cell images straight)
+CHAIN_PITCH_MIN = 0.9  # a stripe's gaps are at least this x its design spacing in membrane rows
 CHAIN_AXIS_DEG = 15.0  # a stripe runs along the specimen's axis (tilted cameras, distortion)
 
 
-def _straight_chains(pos: np.ndarray, cand: np.ndarray, axis: np.ndarray) -> list[np.ndarray]:
+def _row_pitch_px(pos: np.ndarray, dots: np.ndarray, axis: np.ndarray) -> np.ndarray:
+    """(N,) for each of ``dots`` (indices into ``pos``, undistorted pixels): the distance to its
+    nearest neighbour among them in the direction of ``axis`` (within 30 degrees), NaN if none:
+    the membrane's row pitch there."""
+    from scipy.spatial import cKDTree
+
+    p = pos[dots]
+    k = min(len(dots), 9)
+    dist, nb = cKDTree(p).query(p, k=k)
+    out = np.full(len(dots), np.nan)
+    for j in range(1, k):
+        d = p[nb[:, j] % len(dots)] - p
+        along = np.abs(d @ axis) >= np.cos(np.deg2rad(30)) * dist[:, j]
+        out = np.where(np.isnan(out) & along & np.isfinite(dist[:, j]), dist[:, j], out)
+    return out
+
+
+def _straight_chains(
+    pos: np.ndarray, cand: np.ndarray, axis: np.ndarray, pitch: float, design: dict
+) -> list[np.ndarray]:
     """Longitudinal stripes among the blobs ``cand`` (indices; ``pos`` undistorted pixels): each
     a straight line of at least ``MIN_CHAIN_DOTS`` of them (RANSAC) along the specimen's axis
-    (``axis``: its image direction, within ``CHAIN_AXIS_DEG``), its blobs in order along it."""
+    (``axis``: its image direction, within ``CHAIN_AXIS_DEG``), its dots spaced as a stripe's
+    are against the membrane's rows (``pitch``: the membrane's row pitch nearby, pixels; a stripe
+    is spaced (z_top - z_bottom) / (count - 1), the rows height / rows: 3.15 against 2.37 mm),
+    its blobs in order along it."""
     from skimage.measure import LineModelND, ransac
 
     left = np.asarray(cand, np.int64)
@@ -154,9 +183,21 @@ def _straight_chains(pos: np.ndarray, cand: np.ndarray, axis: np.ndarray) -> lis
         left = left[~inl]
         if abs(model.direction @ axis) < np.cos(np.deg2rad(CHAIN_AXIS_DEG)):
             continue  # a row of a ring's dots, not a stripe
-        along = (pos[members] - model.origin) @ model.direction
-        out.append(members[np.argsort(along)])
+        along = np.sort((pos[members] - model.origin) @ model.direction)
+        gap = np.median(np.diff(along))
+        if not gap >= CHAIN_PITCH_MIN * _stripe_over_row_pitch(design) * pitch:
+            continue  # a column of membrane dots (beside a bright edge), not a stripe
+        out.append(members[np.argsort((pos[members] - model.origin) @ model.direction)])
     return out
+
+
+def _stripe_over_row_pitch(design: dict) -> float:
+    """A longitudinal stripe's dot spacing over the membrane's row spacing (design, mm)."""
+    cell, m, spec = design["cell_targets"], design["membrane"], design["specimen"]
+    stripe = (cell["longitudinal_z_top"] - cell["longitudinal_z_bottom"]) / (
+        cell["longitudinal_stripes"][0]["count"] - 1
+    )
+    return stripe / (spec["height"] / m["rows"])
 
 
 def _near_polyline(

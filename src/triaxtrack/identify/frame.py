@@ -8,12 +8,15 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
+from triaxtrack.detect import background_size_px
 from triaxtrack.identify.anchors import _axis_down, _pedestal_anchors
 from triaxtrack.identify.cell import (
+    _band_zone,
     _hide_behind_band,
     _label_cell_stripes,
     _label_longitudinal,
     _on_another_surface,
+    _row_pitch_px,
     _straight_chains,
 )
 from triaxtrack.identify.coded import _ct_maps, _inside_cts, _plausible_cts
@@ -88,13 +91,22 @@ def identify(
     long_names = {s["name"] for s in design["cell_targets"]["longitudinal_stripes"]}
     # the band's blurred edge reaches two lens-blur sigmas beyond its printed edge
     pad = blobs.major_px.to_numpy() / 2 + max(BAND_BLUR_PX, BLUR_REACH * blur_px)
+    # a dot's white level is a closing over `size` pixels: beside a band it reads the band's white
+    size = background_size_px(gray.shape[1], detect_params) if gray is not None else 0
+    known = np.zeros(n, bool)
     for sel in (np.nonzero(f.group == nm)[0] for nm in long_names):
         if len(sel) >= 2:
-            _hide_behind_band(f, pool, sel[np.argsort(f.ids[sel])], pad, design)
+            order = sel[np.argsort(f.ids[sel])]
+            _hide_behind_band(f, pool, order, pad, design)
+            known |= _band_zone(f, order, pad + size, design)
     # a stripe whose coded target is out of the picture is a straight line of free dots on a
     # white band in front of the membrane: never membrane dots, and its band hides the membrane
+    # (dots beside an identified stripe's band are not candidates: their white level is its)
     axis = _axis_down(_pedestal_anchors(centres, design))
-    for order in _straight_chains(pos, np.nonzero(_on_another_surface(pool))[0], axis):
+    free = np.nonzero(pool.free)[0]
+    pitch = float(np.nanmedian(_row_pitch_px(pos, free, axis))) if len(free) > 9 else np.nan
+    cand = np.nonzero(_on_another_surface(pool) & ~known)[0]
+    for order in _straight_chains(pos, cand, axis, pitch, design):
         pool.free[order] = False
         f.reason[order] = "on a longitudinal stripe not identified (its coded target not seen)"
         _hide_behind_band(f, pool, order, pad, design)
