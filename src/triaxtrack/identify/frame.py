@@ -39,7 +39,7 @@ FAR_PX = 1e9
 # 0.5 px the dots kept beside a band were as accurate as the rest on four tests (membrane p99.9
 # and maximum error unchanged); 1.0 px left 80-175 more a test unlabelled
 BAND_BLUR_PX = 0.5
-BLUR_REACH = 2.0  # a blurred edge darkens pixels this many lens-blur sigmas beyond it
+BLUR_REACH = 1.0  # a blurred band edge biases a dot about one lens-blur sigma beyond it (2: a 4K column lost)
 
 
 def identify(
@@ -89,7 +89,7 @@ def identify(
     # reaches the band's (half its major axis and BAND_BLUR_PX from it) is partly hidden and its
     # centroid is biased, so drop what remains there
     long_names = {s["name"] for s in design["cell_targets"]["longitudinal_stripes"]}
-    # the band's blurred edge reaches two lens-blur sigmas beyond its printed edge
+    # the band's blurred edge reaches BLUR_REACH lens-blur sigmas beyond its printed edge
     pad = blobs.major_px.to_numpy() / 2 + max(BAND_BLUR_PX, BLUR_REACH * blur_px)
     # a dot's white level is a closing over `size` pixels: beside a band it reads the band's white
     size = background_size_px(gray.shape[1], detect_params) if gray is not None else 0
