@@ -32,6 +32,7 @@ from triaxtrack.identify import (
     label_frame,
     settle_offsets,
 )
+from triaxtrack.identify.cell import _row_pitch_px, _straight_chains
 from triaxtrack.kit import coded_target_polygons, ct_codes, load_kit_design, target_table
 from triaxtrack.optics import read_cameras
 from triaxtrack.raster import paint
@@ -185,6 +186,25 @@ def test_dots_along_a_dark_edge_are_recentred_against_the_gaps():
     half = 0.5 * dots.minor_px.to_numpy()[1:-1] + 1.0
     new = gap_background_centroids(img, uv[1:-1], uv[:-2], uv[2:], half)
     assert np.abs(new - truth[1:-1]).max() < 0.025
+
+
+def test_a_stripe_is_told_from_a_membrane_column_by_its_spacing(kit):
+    """Among candidate dots on a brighter surface, a straight line along the axis spaced as a
+    longitudinal stripe (3.15 mm) against the membrane's rows (2.37 mm) is a stripe; a column of
+    membrane dots (beside a bright band) is not, nor is a row across the axis."""
+    design = kit[0]
+    rows_px, axis = 2.37 * PX_PER_MM, np.array([0.0, 1.0])
+    grid = np.array([(3.5 * PX_PER_MM * c, rows_px * r) for c in range(8) for r in range(30)])
+    stripe = np.array([(100.0, 3.15 * PX_PER_MM * k) for k in range(20)])
+    pos = np.r_[grid, stripe]
+    pitch = float(np.nanmedian(_row_pitch_px(pos, np.arange(len(grid)), axis)))
+    assert pitch == pytest.approx(rows_px)
+    column = np.arange(30 * 3, 30 * 4)  # the grid's fourth column
+    row = np.arange(0, 8 * 30, 30)  # its first row (8 dots across the axis)
+    stripe_ids = np.arange(len(grid), len(pos))
+    found = _straight_chains(pos, np.r_[stripe_ids, column, row], axis, pitch, design)
+    assert len(found) == 1 and sorted(found[0]) == list(stripe_ids)
+    assert list(found[0]) == list(stripe_ids) or list(found[0]) == list(stripe_ids[::-1])  # in order
 
 
 def test_membrane_row_ends():

@@ -77,8 +77,7 @@ class DetectParams:
 EDGE_RADIUS_PX = 3  # a dot with non-dot dark ink this close (L2, pixel centres) is beside an edge
 BLOB_COLUMNS = [
     "u_px", "v_px", "area_px", "major_px", "minor_px", "angle_rad", "roundness", "fill",
-    "contrast", "background", "mass", "cov_uu", "cov_uv", "cov_vv", "beside_edge", "split", "noise",
-    "blur",
+    "contrast", "background", "cov_uu", "cov_uv", "cov_vv", "beside_edge", "split", "blur",
 ]  # fmt: skip
 
 
@@ -148,7 +147,8 @@ SMOOTH_PER_BLUR = 0.7
 # Two dots whose blurred images touch are one ink component with two maxima of the smoothed
 # contrast. A maximum is a dot of its own when it rises above the saddle towards every higher
 # one by this many standard deviations of the smoothed noise and by this fraction of its own
-# contrast (h-maxima); the component is then cut along the valleys between them (watershed).
+# contrast (h-maxima); the component is then cut along the valleys between them (watershed). On
+# compressed footage the measured noise reads low (noise_sigma) and the fraction governs.
 SPLIT_NOISE_K = 4.0
 SPLIT_DIP_FRACTION = 0.1
 # only components up to this many times the median blob's area are split: larger ones are edges,
@@ -218,9 +218,8 @@ def detect_blobs(gray: np.ndarray, params: DetectParams | None = None) -> pd.Dat
     contrast smoothed by ``SMOOTH_PER_BLUR`` x the blur (noise-proof at little cost in
     resolution: the image is already that soft), and blobs holding several significant maxima
     (touching dots) cut apart at the valleys between them (``split`` True). Centroids and masses
-    are always weighted by the raw contrast. ``noise``: the frame's pixel noise (grey levels,
-    :func:`noise_sigma`). No filtering by shape here beyond ``min_area_px``/``max_area_px``; see
-    :func:`dot_mask`.
+    are always weighted by the raw contrast. No filtering by shape here beyond
+    ``min_area_px``/``max_area_px``; see :func:`dot_mask`.
     """
     p = params or DetectParams()
     g = np.asarray(gray)
@@ -230,14 +229,14 @@ def detect_blobs(gray: np.ndarray, params: DetectParams | None = None) -> pd.Dat
     blur = blur_sigma(g, blobs)
     dots = dot_mask(blobs, p)
     if dots.any() and blur >= BLUR_SMOOTH_REL * float(np.median(blobs.minor_px.to_numpy()[dots])):
-        blobs = _detect(g, p, SMOOTH_PER_BLUR * blur)
+        blobs = _detect(g, p, SMOOTH_PER_BLUR * blur, noise_sigma(g))
     return blobs.assign(blur=blur)
 
 
-def _detect(g: np.ndarray, p: DetectParams, smooth_px: float) -> pd.DataFrame:
-    """:func:`detect_blobs` at a given smoothing of the ink mask (0: none, no splitting)."""
+def _detect(g: np.ndarray, p: DetectParams, smooth_px: float, sigma: float = 0.0) -> pd.DataFrame:
+    """:func:`detect_blobs` at a given smoothing of the ink mask (0: none, no splitting), with
+    the frame's pixel noise ``sigma`` (grey levels) for the splitting."""
     size = background_size_px(g.shape[1], p)
-    sigma = noise_sigma(g)
     gf = g.astype(np.float32)
     bg = background(cv2.GaussianBlur(gf, (0, 0), smooth_px) if smooth_px > 0 else g, size)
     contrast = bg - gf
@@ -261,7 +260,6 @@ def _detect(g: np.ndarray, p: DetectParams, smooth_px: float) -> pd.DataFrame:
     grown = np.where(labels > 0, labels, grown)
     wts = np.clip(contrast, 0, None)
     cen = _label_sums(grown, n, wts)
-    mass = np.bincount(grown.ravel(), weights=(wts / np.maximum(bg, 1.0)).ravel(), minlength=n)
     idx = np.nonzero(keep)[0]
     m0 = geo["m0"][idx]
     mx, my = geo["x"][idx] / m0, geo["y"][idx] / m0
@@ -280,13 +278,11 @@ def _detect(g: np.ndarray, p: DetectParams, smooth_px: float) -> pd.DataFrame:
         "fill": area[idx] / (np.pi * major * minor / 4),
         "contrast": peak[idx],
         "background": bg[_pixel(my, g.shape[0]), _pixel(mx, g.shape[1])],
-        "mass": mass[idx],
         "cov_uu": cuu,
         "cov_uv": cuv,
         "cov_vv": cvv,
         "beside_edge": _beside_edge(components, area, geo, p)[idx],
         "split": piece[idx],
-        "noise": np.full(len(idx), sigma),
     })  # fmt: skip
 
 

@@ -6,14 +6,14 @@ from there each ID is carried forward without detecting or identifying the frame
 1. **Predict** each target from its recent motion (constant velocity; a target that was not
    reported in the previous frame moves with its neighbours, see 4).
 2. **Measure** it locally (:mod:`triaxtrack.window`): in a small window around the prediction
-   the window's own white level (a plane fitted to the ring of pixels around the dot) and pixel
-   noise (their robust standard deviation) are measured; ink is darker than the white level by
-   ``ink_fraction`` of it and by ``INK_NOISE_K`` times the noise (so a uniform change of light
-   changes nothing), found within a disc of the dot's semi-major axis plus ``disc_margin_px``
-   that is re-centred on the blob (mean shift); the contrast-weighted centroid is taken over
-   the blob grown by two pixels, with its standard uncertainty ``sigma_px`` propagated from the
-   pixel noise. The window is the search gate: the nearest detection to the prediction is the
-   blob the disc converges on.
+   the window's own white level (a trimmed mean of its brighter pixels) and pixel noise (held
+   to the frame's) are measured; ink is darker than the white level by ``ink_fraction`` of it
+   and by ``INK_NOISE_K`` times the noise (so a uniform change of light changes nothing), found
+   within a disc of the dot's semi-major axis plus ``disc_margin_px`` that is re-centred on the
+   blob (mean shift); the contrast-weighted centroid is taken over the blob grown by one pixel,
+   as in detection, with its standard uncertainty ``sigma_px`` propagated from the pixel noise.
+   The window is the search gate: the nearest detection to the prediction is the blob the disc
+   converges on.
 3. **Check**, and drop for this frame with a reason, never swap:
 
    * ``edge``: the window leaves the image;
@@ -379,8 +379,8 @@ def track_frames(
 
     Returns a ``TRACKS`` table: one row per labelled target per frame in ``report`` (the
     labels' frame included, re-measured by the tracker so that every frame has the same
-    centroid estimator), with the extra column ``sigma_px``: the standard uncertainty of each
-    coordinate of a reported centroid from the pixel noise (NaN where not reported), pixels.
+    centroid estimator), ``sigma_px`` the standard uncertainty of each coordinate of a reported
+    centroid (NaN where not reported), pixels.
     """
     cfg = cfg or TrackingConfig()
     state = _init_state(labels, cfg)

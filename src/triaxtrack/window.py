@@ -95,17 +95,13 @@ def _masked_median(values: np.ndarray, use: np.ndarray) -> np.ndarray:
     return np.where(cnt > 0, (lo + hi) / 2, np.nan)
 
 
-def window_levels(
-    patch: np.ndarray, annulus: np.ndarray, xs: np.ndarray, ys: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def window_levels(patch: np.ndarray, annulus: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The white level and pixel noise of (m, h, w) windows. The white level is the mean of each
-    window's pixels between its ``WHITE_BAND`` percentiles, as tracking always measured it (a
-    plane fitted to the ``annulus`` (an (m, h, w) mask) fails in a dense grid, whose annulus is
-    mostly the neighbours' edges; ``xs``, ``ys``: the pixel offsets from the window centre, kept
-    for the signature); the noise is the spread of the annulus's pixels above it, over
-    ``HALF_SPREAD`` (the brighter half of normal noise), at least the quantisation noise.
-    Returns ``(white (m, h, w), noise (m,), sigma_white (m,))``: the white level at every pixel,
-    the noise, and the white level's standard uncertainty."""
+    window's pixels between its ``WHITE_BAND`` percentiles (a plane fitted to the ``annulus``,
+    an (m, h, w) mask, fails in a dense grid, whose annulus is mostly the neighbours' edges); the
+    noise is the spread of the annulus's pixels above it, over ``ABOVE_WHITE_SPREAD``, at least
+    the quantisation noise. Returns ``(white (m,), noise (m,), sigma_white (m,))``: the white
+    level, the noise, and the white level's standard uncertainty."""
     m = len(patch)
     g = patch.reshape(m, -1)
     ring = np.broadcast_to(annulus, patch.shape).reshape(m, -1)
@@ -116,33 +112,10 @@ def window_levels(
     noise = MAD_TO_SIGMA * _masked_median(g - white[:, None], above) / ABOVE_WHITE_SPREAD
     noise = np.maximum(np.nan_to_num(noise), QUANTISATION_NOISE)
     count = np.maximum(band.sum(axis=1), 3)
-    return np.broadcast_to(white[:, None, None], patch.shape), noise, noise / np.sqrt(count)
+    return white, noise, noise / np.sqrt(count)
 
 
 STRUCTURE_K = 3.0  # a window's spread above this x the frame's noise is structure, not noise
-FRAME_NOISE_SAMPLE = 400  # windows the frame's noise is the median of
-
-
-def _frame_noise(g: np.ndarray, uv_px: np.ndarray, radius_px: np.ndarray) -> float:
-    """The frame's pixel noise: the median of :func:`window_levels`' noise over (up to
-    ``FRAME_NOISE_SAMPLE``, evenly chosen) targets' windows inside the image, grey levels."""
-    H, W = g.shape
-    if len(uv_px) == 0:
-        return QUANTISATION_NOISE
-    pick = np.unique(np.linspace(0, len(uv_px) - 1, min(len(uv_px), FRAME_NOISE_SAMPLE)).astype(int))
-    h = int(np.ceil(np.nanmax(radius_px[pick]))) + 2
-    cu = np.rint(uv_px[pick, 0]).astype(np.int64)
-    cv = np.rint(uv_px[pick, 1]).astype(np.int64)
-    inside = (cu - h >= 0) & (cv - h >= 0) & (cu + h < W) & (cv + h < H)
-    if not inside.any():
-        return QUANTISATION_NOISE
-    off = np.arange(-h, h + 1)
-    patch = g[cv[inside, None, None] + off[None, :, None], cu[inside, None, None] + off[None, None, :]]
-    xs = off[None, None, :].astype(np.float64)
-    ys = off[None, :, None].astype(np.float64)
-    annulus = xs**2 + ys**2 > ((radius_px[pick][inside] + ANNULUS_GAP_PX) ** 2)[:, None, None]
-    _, noise, _ = window_levels(patch.astype(np.float64), annulus, xs, ys)
-    return float(max(np.median(noise), QUANTISATION_NOISE))
 
 
 def measure_windows(
@@ -166,7 +139,8 @@ def measure_windows(
     finite = np.isfinite(uv_px).all(axis=1) & np.isfinite(radius_px)
     reason[~finite] = "lost"
     half = np.where(finite, np.ceil(np.nan_to_num(radius_px)).astype(np.int64) + 2, 0)
-    frame_noise = _frame_noise(g, uv_px[finite], radius_px[finite])
+    # the windows, grouped by size, and their levels first: the frame's noise is their median
+    groups = []
     for h in np.unique(half[finite]):
         sel = np.nonzero(finite & (half == h))[0]
         cu = np.rint(uv_px[sel, 0]).astype(np.int64)
@@ -181,15 +155,18 @@ def measure_windows(
         patch = patch.astype(np.float64)
         xs = off[None, None, :].astype(np.float64)
         ys = off[None, :, None].astype(np.float64)
+        annulus = xs**2 + ys**2 > ((radius_px[sel] + ANNULUS_GAP_PX) ** 2)[:, None, None]
+        groups.append((sel, cu, cv, patch, xs, ys, *window_levels(patch, annulus)))
+    if not groups:
+        return WindowMeasure(out, area, mass, smass, spx, white_all, noise_all, reason)
+    frame_noise = max(float(np.median(np.concatenate([grp[7] for grp in groups]))), QUANTISATION_NOISE)
+    for sel, cu, cv, patch, xs, ys, white, noise, s_white in groups:
         rad = radius_px[sel]
-        annulus = xs**2 + ys**2 > ((rad + ANNULUS_GAP_PX) ** 2)[:, None, None]
-        plane, noise, s_white = window_levels(patch, annulus, xs, ys)
         # the codec flattens some windows' white (their spread reads below the noise) and the
         # dark beyond an edge fills others' (far above it): each is held to the frame's noise
         noise = np.clip(noise, frame_noise, STRUCTURE_K * frame_noise)
-        white = plane[:, h, h]  # at the window centre
-        contrast = plane - patch
-        level = np.maximum(INK_NOISE_K * noise[:, None, None], ink_fraction * plane)
+        contrast = white[:, None, None] - patch
+        level = np.maximum(INK_NOISE_K * noise, ink_fraction * white)[:, None, None]
         ink = contrast > level
         sure = contrast > level + INK_NOISE_K * noise[:, None, None]  # ink beyond the noise
         wts = np.clip(contrast, 0, None)

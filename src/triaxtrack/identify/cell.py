@@ -142,22 +142,22 @@ CHAIN_LINE_PX = 1.0  # ... within this of a straight line (undistorted pixels: a
 # cell images straight)
 CHAIN_PITCH_MIN = 0.9  # a stripe's gaps are at least this x its design spacing in membrane rows
 CHAIN_AXIS_DEG = 15.0  # a stripe runs along the specimen's axis (tilted cameras, distortion)
+PITCH_NEIGHBOURS = 8  # a grid dot's row neighbour is among its 8 nearest
+PITCH_AXIS_DEG = 30.0  # ... in the axis's direction within this (a nearer row neighbour comes first)
 
 
 def _row_pitch_px(pos: np.ndarray, dots: np.ndarray, axis: np.ndarray) -> np.ndarray:
     """(N,) for each of ``dots`` (indices into ``pos``, undistorted pixels): the distance to its
-    nearest neighbour among them in the direction of ``axis`` (within 30 degrees), NaN if none:
-    the membrane's row pitch there."""
+    nearest neighbour among its ``PITCH_NEIGHBOURS`` nearest in the direction of ``axis`` (within
+    ``PITCH_AXIS_DEG``), NaN if none: the membrane's row pitch there."""
     from scipy.spatial import cKDTree
 
     p = pos[dots]
-    k = min(len(dots), 9)
-    dist, nb = cKDTree(p).query(p, k=k)
+    dist, nb = cKDTree(p).query(p, k=min(len(dots), PITCH_NEIGHBOURS + 1))
     out = np.full(len(dots), np.nan)
-    for j in range(1, k):
-        d = p[nb[:, j] % len(dots)] - p
-        along = np.abs(d @ axis) >= np.cos(np.deg2rad(30)) * dist[:, j]
-        out = np.where(np.isnan(out) & along & np.isfinite(dist[:, j]), dist[:, j], out)
+    for j in range(1, dist.shape[1]):  # nearest first; column 0 is the dot itself
+        along = np.abs((p[nb[:, j]] - p) @ axis) >= np.cos(np.deg2rad(PITCH_AXIS_DEG)) * dist[:, j]
+        out = np.where(np.isnan(out) & along, dist[:, j], out)
     return out
 
 
@@ -183,11 +183,11 @@ def _straight_chains(
         left = left[~inl]
         if abs(model.direction @ axis) < np.cos(np.deg2rad(CHAIN_AXIS_DEG)):
             continue  # a row of a ring's dots, not a stripe
-        along = np.sort((pos[members] - model.origin) @ model.direction)
-        gap = np.median(np.diff(along))
-        if not gap >= CHAIN_PITCH_MIN * _stripe_over_row_pitch(design) * pitch:
+        along = (pos[members] - model.origin) @ model.direction
+        order = np.argsort(along)
+        if not np.median(np.diff(along[order])) >= CHAIN_PITCH_MIN * _stripe_over_row_pitch(design) * pitch:
             continue  # a column of membrane dots (beside a bright edge), not a stripe
-        out.append(members[np.argsort((pos[members] - model.origin) @ model.direction)])
+        out.append(members[order])
     return out
 
 
