@@ -218,6 +218,7 @@ def test_too_many_missing_dots(design, table):
 
 MISSING_NOISE_MM = 0.01  # noise on every point of the missing-dot cases; sigma_mm says so
 MISSING_TOL = 1e-3  # relative volume error bound of a frame with dots missing (0.1 %)
+MISSING_SIGMA_MAX = 5e-4  # relative: the stated 1-sigma is not absurd (measured 2.3e-5 to 1.2e-4)
 MEM = "surface == 'membrane'"
 MISSING_CASES = {  # name: (kit rows and columns hidden, measured fraction)
     "top 3 rows": ("row <= 3", 57 / 60),
@@ -230,8 +231,8 @@ MISSING_CASES = {  # name: (kit rows and columns hidden, measured fraction)
 @pytest.mark.parametrize("case", list(MISSING_CASES))
 def test_missing_regions(design, table, case):
     """(a)-(d): end rows, a patch, a column hidden in every frame: the volume within 0.1 % of the
-    truth, ``measured_fraction`` exact, and the 1-sigma uncertainty covering the error (3 sigma)
-    without being absurd (below 10x the 0.1 % bound)."""
+    truth (measured: 1.4e-4 at worst, asserted within NOISY_TOL), ``measured_fraction`` exact, and
+    the 1-sigma uncertainty covering the error (3 sigma) without being absurd."""
     query, fraction = MISSING_CASES[case]
     hidden = table.query(f"{MEM} and {query}")["id"]
     points = series_points(design, table, LOADED, (0.0, 1.0), noise=MISSING_NOISE_MM)
@@ -245,9 +246,9 @@ def test_missing_regions(design, table, case):
     assert (vol["reason"] == "").all()
     np.testing.assert_allclose(vol["measured_fraction"], fraction, rtol=1e-12)
     assert (vol["filled_dots"] == len(hidden)).all()
-    assert np.all(np.abs(err) < MISSING_TOL * truth)
+    assert np.all(np.abs(err) < NOISY_TOL * truth)
     assert np.all(np.abs(err) < 3 * sigma)
-    assert np.all(sigma < 10 * MISSING_TOL * truth)
+    assert np.all(sigma < MISSING_SIGMA_MAX * truth)
 
 
 def test_hopeless_frames_and_failed_first_frame(design, table, tmp_path):
@@ -271,7 +272,9 @@ def test_hopeless_frames_and_failed_first_frame(design, table, tmp_path):
     # t0 is taken at frame 1, already thinned: a small bias of the membrane shell
     assert abs(vol.loc[1, "volume_mm3"] / LOADED.soil_volume(0.5) - 1) < MISSING_TOL
     assert sorted(strains["frame"].unique()) == [1]
-    out = list(volume_meshes(points[~drop], table, design, [0, 1, 2], tmp_path, refine=1))
+    ref = int(vol.loc[1, "reference_frame"])
+    out = list(volume_meshes(points[~drop], table, design, [0, 1, 2], tmp_path, refine=1,
+                             reference_frame=ref))  # fmt: skip
     assert [(f, p is None) for f, p, _ in out] == [(0, True), (1, False), (2, True)]
     assert "membrane dots are missing" in out[0][2] and out[1][1].stat().st_size > 0
 

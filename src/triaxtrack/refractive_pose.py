@@ -100,20 +100,28 @@ def project(
     return uv
 
 
-def straight_line_pose(camera: Camera, obs: PoseObservations) -> tuple[Camera, np.ndarray] | None:
-    """A first pose by PnP (RANSAC, then Levenberg-Marquardt on the inliers) ignoring the
-    refraction; returns the camera and the inlier mask, or None when PnP fails."""
-    if len(obs.ids) < 4:
+def pnp_pose(
+    camera: Camera, xyz: np.ndarray, uv: np.ndarray, ransac_px: float
+) -> tuple[Camera, np.ndarray] | None:
+    """``camera`` posed by PnP on (N, 3) points (mm) and their (N, 2) pixels: RANSAC (SQPnP,
+    inliers within ``ransac_px``), then Levenberg-Marquardt on the inliers; returns the camera
+    and the inlier mask, or None when PnP fails or keeps fewer than 4 points."""
+    if len(xyz) < 4:
         return None
     ok, rvec, tvec, inl = cv2.solvePnPRansac(
-        obs.xyz, obs.uv, camera.K, camera.dist, reprojectionError=INITIAL_RANSAC_PX, flags=cv2.SOLVEPNP_SQPNP
+        xyz, uv, camera.K, camera.dist, reprojectionError=ransac_px, flags=cv2.SOLVEPNP_SQPNP
     )
     if not ok or inl is None or len(inl) < 4:
         return None
-    inlier = np.zeros(len(obs.ids), bool)
+    inlier = np.zeros(len(xyz), bool)
     inlier[inl.ravel()] = True
-    rvec, tvec = cv2.solvePnPRefineLM(obs.xyz[inlier], obs.uv[inlier], camera.K, camera.dist, rvec, tvec)
+    rvec, tvec = cv2.solvePnPRefineLM(xyz[inlier], uv[inlier], camera.K, camera.dist, rvec, tvec)
     return with_pose(camera, rvec, tvec), inlier
+
+
+def straight_line_pose(camera: Camera, obs: PoseObservations) -> tuple[Camera, np.ndarray] | None:
+    """A first pose by :func:`pnp_pose` ignoring the refraction (``INITIAL_RANSAC_PX``)."""
+    return pnp_pose(camera, obs.xyz, obs.uv, INITIAL_RANSAC_PX)
 
 
 def _subset(obs: PoseObservations, keep: np.ndarray) -> PoseObservations:
@@ -167,9 +175,7 @@ def pose_camera(
     cam, use = first
     if use.sum() < min_targets:
         return f"straight-line PnP found {int(use.sum())} consistent targets of {len(obs.ids)}"
-    err = np.full(len(obs.ids), np.inf)
-    r = np.full((len(obs.ids), 2), np.nan)
-    for k in range(ROBUST_ROUNDS):
+    for k in range(ROBUST_ROUNDS):  # at least one
         cam = refine_pose(cam, obs, cell, use, robust_px=inlier_px if k == 0 else None)
         r = project(cam, obs, cell, pixels_to_normalized(cam, obs.uv)) - obs.uv
         err = np.hypot(r[:, 0], r[:, 1])

@@ -41,7 +41,7 @@ import pandas as pd
 from scipy.optimize import least_squares
 
 from triaxtrack.optics import Camera, CellOptics, project_air
-from triaxtrack.refractive_pose import PoseObservations, pose_camera
+from triaxtrack.refractive_pose import PoseObservations, pnp_pose, pose_camera
 
 COLMAP_PIXEL_OFFSET = 0.5  # COLMAP puts the centre of the top-left pixel at (0.5, 0.5)
 FULL_OPENCV_DIST = 8  # k1 k2 p1 p2 k3 k4 k5 k6: COLMAP's FULL_OPENCV holds both OpenCV models
@@ -132,19 +132,12 @@ def initial_poses(
             continue
         X = xyz.loc[obs["id"]].to_numpy(np.float64)
         uv = obs[["u_px", "v_px"]].to_numpy(np.float64)
-        ok, rvec, tvec, inl = cv2.solvePnPRansac(
-            X, uv, cam.K, cam.dist, reprojectionError=cfg.ransac_px, flags=cv2.SOLVEPNP_SQPNP
-        )
-        inlier = np.zeros(len(obs), bool)
-        if ok and inl is not None:
-            inlier[inl.ravel()] = True
+        pose = pnp_pose(cam, X, uv, cfg.ransac_px)
+        inlier = pose[1] if pose is not None else np.zeros(len(obs), bool)
         if inlier.sum() < cfg.min_targets:
             dropped[name] = f"PnP found {int(inlier.sum())} consistent cell-wall targets of {len(obs)}"
             continue
-        rvec, tvec = cv2.solvePnPRefineLM(X[inlier], uv[inlier], cam.K, cam.dist, rvec, tvec)
-        posed[name] = Camera(
-            name, cam.width, cam.height, cam.K, cam.dist, cv2.Rodrigues(rvec)[0], tvec.ravel()
-        )
+        posed[name] = pose[0]
         parts.append(obs.assign(inlier=inlier))
     cols = [*observations.columns, "inlier"]
     out = pd.concat(parts, ignore_index=True) if parts else pd.DataFrame(columns=cols)
@@ -437,16 +430,17 @@ def reconstruct_cell(
     """
     obs = earliest_observations(labels, design["id"].to_numpy(), cfg.min_targets)
     posed, obs, dropped = initial_poses(cameras, obs, design, cfg)
+    through_water = water is not None and cell is not None and cfg.pose_from_water
     for name in sorted(set(cameras) - set(posed) - set(dropped)):
         dropped[name] = "no frame with enough labelled cell-wall targets"
     if len(posed) >= 2:
         rec = _air_reconstruction(posed, obs, design, cfg)
-    elif water is not None and cell is not None and cfg.pose_from_water:
+    elif through_water:
         rec = _nominal_reconstruction(cell, labels)
         dropped = {n: dropped.get(n, "no cell frame from the wall: posed through it") for n in cameras}
     else:
         rec = None
-    if rec is not None and water is not None and cell is not None and cfg.pose_from_water and dropped:
+    if rec is not None and through_water and dropped:
         rec = _add_water_cameras(rec, cameras, labels, design, water, cell, cfg, dropped)
         dropped = rec.dropped
     if rec is None or len(rec.cameras) < 2:

@@ -9,12 +9,12 @@ from triaxtrack.kit import design_points, load_kit_design, target_table
 from triaxtrack.logs import log_to
 from triaxtrack.optics import cell_optics, read_cameras
 from triaxtrack.plots import reconstruction_picture
+from triaxtrack.sfm import REFERENCE_FRAME
 from triaxtrack.tables import LABELS, OBSERVATIONS, POINTS, RESIDUALS, read_table, write_table
 from triaxtrack.triangulate import TriangulationConfig, quality_report, reconstruct_specimen
 
 log_to(snakemake.log[0])
 
-FRAME = 0  # the reference frame: the first of the test
 
 cell_doc = json.loads(open(snakemake.input.cell).read())
 cameras = read_cameras(snakemake.input.cell)
@@ -43,8 +43,8 @@ rec = reconstruct_specimen(
     cell,
     cell_doc["cell"]["outer_radius_sigma_mm"],
     TriangulationConfig.from_dict(snakemake.params.reconstruction),
-    FRAME,
-    FRAME / fps,
+    REFERENCE_FRAME,
+    REFERENCE_FRAME / fps,
 )
 membrane_ids = table.loc[table["surface"] == "membrane", "id"].to_numpy()
 quality = quality_report(rec, labels, membrane_ids)
@@ -52,15 +52,15 @@ quality["cell"]["wavelength_nm"] = given["wavelength_nm"] or design["cell"].get(
 quality["cell"]["temperature_c"] = given["temperature_c"] or design["cell"].get("temperature_c")
 quality["cell"]["axis_tilt_deg"] = cell_doc["cell"]["axis_tilt_deg"]
 quality["cell"]["cylinder_rms_mm"] = cell_doc["cell"]["cylinder_rms_mm"]
-quality["cell"]["source"] = cell_doc["cell"].get("source", "cell_wall")
-quality["cameras_posed"] = cell_doc.get("cameras_posed", {})
+quality["cell"]["source"] = cell_doc["cell"]["source"]
+quality["cameras_posed"] = cell_doc["cameras_posed"]
 quality["cameras_dropped"] = cell_doc["cameras_dropped"]
 
 with open(snakemake.output.cameras, "w") as f:
     json.dump({"cameras": {n: c.to_json() for n, c in sorted(rec.cameras.items())}}, f, indent=2)
 write_table(rec.points, snakemake.output.points, POINTS)
 used = rec.residuals[rec.residuals["used"]]
-write_table(used[used["frame"] == FRAME], snakemake.output.observations, OBSERVATIONS)
+write_table(used[used["frame"] == REFERENCE_FRAME], snakemake.output.observations, OBSERVATIONS)
 write_table(rec.residuals, snakemake.output.residuals, RESIDUALS)
 with open(snakemake.output.quality, "w") as f:
     json.dump(quality, f, indent=2)

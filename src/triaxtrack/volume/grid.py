@@ -48,12 +48,6 @@ class MembraneGrid:
         """Number of dots filled from their neighbours."""
         return int((~self.measured).sum())
 
-    @property
-    def measured_fraction(self) -> float:
-        """Share of the membrane's design surface whose dot was measured: the grid is uniform in
-        design theta and z, so every dot stands for the same design area."""
-        return float(self.measured.mean())
-
 
 def _membrane_layout(table: pd.DataFrame) -> tuple[pd.DataFrame, np.ndarray, np.ndarray]:
     """Membrane rows of the design table with grid indices ``i, j`` added; design z and theta."""

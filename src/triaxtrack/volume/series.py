@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from triaxtrack.tables import VOLUME_RESULT, conform
 from triaxtrack.volume.cap import TopCap, top_cap
 from triaxtrack.volume.grid import (
     MAX_MISSING_SHARE,
@@ -29,12 +30,6 @@ from triaxtrack.volume.strains import strain_field
 from triaxtrack.volume.uncertainty import volume_uncertainty
 
 FAILURES = (ValueError, np.linalg.LinAlgError)  # what makes one frame fail (NaN and a reason)
-COLUMNS = [
-    "frame", "time_s", "volume_mm3", "axial_strain", "volumetric_strain", "height_mm", "radial_strain",
-    "volume_change_mm3", "mesh_volume_mm3", "chordal_mm3", "membrane_mm3", "volume_sigma_mm3",
-    "measured_fraction", "filled_dots", "watertight", "reference_frame", "warning", "reason",
-]  # fmt: skip
-FLOAT_COLUMNS = COLUMNS[1:13]
 
 
 def measured_share(points: pd.DataFrame, table: pd.DataFrame) -> float:
@@ -109,8 +104,8 @@ def volume_series(
             continue
         k0, _, h0, v0 = ref
         warnings = []
-        if 1 - grid.measured_fraction > warn_missing_share:
-            warnings.append(f"{1 - grid.measured_fraction:.1%} of the membrane dots filled")
+        if 1 - share > warn_missing_share:
+            warnings.append(f"{1 - share:.1%} of the membrane dots filled")
         if not np.isfinite(unc.fill_mm3):
             warnings.append("the fill's uncertainty is unknown (no leave-out place)")
         if k0 != frames[0]:
@@ -126,15 +121,9 @@ def volume_series(
             "reference_frame": k0, "warning": "; ".join(warnings), "reason": "",
         })  # fmt: skip
         strain_parts.append(strains.assign(frame=int(frame), time_s=time_s))
-    vol = pd.DataFrame(rows).reindex(columns=COLUMNS)
-    vol["frame"] = vol["frame"].astype(np.int64)
-    for c in FLOAT_COLUMNS:
-        vol[c] = vol[c].astype(float)
-    vol["filled_dots"] = vol["filled_dots"].astype("Int64")
-    vol["watertight"] = vol["watertight"].astype("boolean")
-    vol["reference_frame"] = vol["reference_frame"].astype("Int64")
-    for c in ("warning", "reason"):
-        vol[c] = vol[c].fillna("").astype(object)
+    vol = pd.DataFrame(rows).reindex(columns=list(VOLUME_RESULT.columns))
+    vol[["warning", "reason"]] = vol[["warning", "reason"]].fillna("")
+    vol = conform(vol, VOLUME_RESULT, "volume_series")
     strain_cols = ["frame", "time_s", "row", "col", "theta_rad", "z_mm", "e_zz", "e_tt", "e_tz"]
     strains = pd.concat(strain_parts, ignore_index=True)[strain_cols] if strain_parts else (
         pd.DataFrame({c: pd.Series(dtype="int64" if c in ("frame", "row", "col") else "float64")
@@ -158,18 +147,17 @@ def volume_meshes(
     """Write the soil surface (the membrane's inner surface closed by the pedestal faces, mm,
     cell frame) of each of ``frames`` as ``out_dir/frame_<frame>.ply``; yields ``(frame, path,
     '')``, or ``(frame, None, reason)`` for a frame that fails (nothing written). The reference
-    for the membrane's thinning is ``reference_frame`` (default: the first frame of ``points``
-    that succeeds); when none succeeds every frame is skipped with that reason."""
+    for the membrane's thinning is ``reference_frame`` (:func:`volume_series`'
+    ``reference_frame``; None when no frame succeeded: every frame is skipped)."""
     if t0 is None:
         t0 = float(design["specimen"]["membrane_thickness"])
     grid0, ref_error = None, "no frame of the test succeeds"
-    candidates = sorted(points["frame"].unique()) if reference_frame is None else [reference_frame]
-    for k in candidates:
+    if reference_frame is not None:
         try:
-            grid0 = frame_grid(points[points["frame"] == k], table, design, t0, max_missing_share)[0]
-            break
+            pk = points[points["frame"] == reference_frame]
+            grid0 = frame_grid(pk, table, design, t0, max_missing_share)[0]
         except FAILURES as err:
-            ref_error = f"reference frame {k} failed: {err}"
+            ref_error = f"reference frame {reference_frame} failed: {err}"
     for frame in frames:
         if grid0 is None:
             yield int(frame), None, ref_error
