@@ -180,7 +180,7 @@ def test_new_settings_default_to_todays_render(small_test, monkeypatch):
     the small test's own, and the cameras do not move."""
     import zlib
 
-    from triaxtrack.simulate import VIGNETTING, make_cameras
+    from triaxtrack.simulate import VIGNETTING
 
     cfg = SimulationConfig()
     assert (cfg.vignetting, cfg.light_gradient, cfg.exposure_drift) == (VIGNETTING, 0.0, 0.0) == (0.22, 0, 0)
@@ -199,14 +199,6 @@ def test_new_settings_default_to_todays_render(small_test, monkeypatch):
     noise = rng.standard_normal(before.shape, dtype=np.float32)
     before = before + scene.cfg.noise_sigma * noise * np.sqrt(np.maximum(before, 1) / 128)
     assert np.array_equal(img, np.clip(np.round(before), 0, 255).astype(np.uint8))
-    truth = pd.read_parquet(small_test / "truth" / "observations.parquet")
-    ref = truth[(truth.camera == "cam02") & (truth.frame == 1)].sort_values("id")
-    assert list(ref.id) == sorted(obs.id)
-    a, b = (
-        make_cameras(SimulationConfig(cameras=5)),
-        make_cameras(SimulationConfig(cameras=5, camera_tilt_deg=0.0)),
-    )
-    assert all(np.array_equal(x.R, y.R) and np.array_equal(x.K, y.K) for x, y in zip(a, b, strict=True))
 
 
 def test_nvr_preset_and_explicit_keys():
@@ -253,7 +245,8 @@ def test_timestamp_overlay_is_bright_text_and_hides_its_targets(small_test, monk
     outside = np.ones(img.shape, bool)
     outside[y0 : y1 + 1, x0 : x1 + 1] = False
     assert np.array_equal(img[outside], plain[outside])  # drawn in the box only
-    assert (obs.u_px > x1).all() or (obs.v_px > y1).all()
+    ring, text = footage._overlay_masks(960, 540, footage.timestamp_text(0, 15.0))
+    assert (ring >= text).all() and (ring > 0.5).sum() > 1.5 * (text > 0.5).sum()  # a dark outline
     # the truth rule, with the box moved over the middle of the picture
     box = (400, 200, 560, 330)
     monkeypatch.setattr(footage, "overlay_box", lambda w, h: box)

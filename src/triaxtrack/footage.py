@@ -42,14 +42,15 @@ GREY_OVERLAY_OUTLINE = 15.0  # near-black outline
 # date and time the overlay can show
 _OVERLAY_TEMPLATES = tuple(f"{d * 4}-{d * 2}-{d * 2} {d * 2}:{d * 2}:{d * 2}" for d in "0123456789")
 
-# -- seeding: the third element of the per-camera seed sequence, distinct from the simulator's
-# (noise: frame numbers; calibration: 7 and 11; tilt: simulate.TILT_STREAM)
-LIGHT_STREAM = 101
+# -- seeding: per camera, the seed sequence [seed, crc32(camera), *stream]: a frame's noise has
+# the stream (frame,), the calibration images (7,) and (11,); the effects' streams have two
+# elements, so they never coincide with a frame's
+LIGHT_STREAM = (0, 1)
 
 
-def camera_rng(seed: int, camera: str, stream: int) -> np.random.Generator:
-    """A generator seeded by the test's seed, the camera's name and a stream number."""
-    return np.random.default_rng([seed, zlib.crc32(camera.encode()), stream])
+def camera_rng(seed: int, camera: str, stream: tuple[int, ...]) -> np.random.Generator:
+    """A generator seeded by the test's seed, the camera's name and a stream (see above)."""
+    return np.random.default_rng([seed, zlib.crc32(camera.encode()), *stream])
 
 
 # ---------------------------------------------------------------- light and exposure
@@ -128,12 +129,12 @@ def _overlay_layout(width: int, height: int) -> tuple[float, int, int, tuple[int
 def _overlay_masks(width: int, height: int, text: str) -> tuple[np.ndarray, np.ndarray]:
     """Anti-aliased (height, width) alpha in [0, 1] of the outline and of the text strokes."""
     scale, stroke, outline, org = _overlay_layout(width, height)
-    masks = []
-    for thickness in (outline, stroke):
-        m = np.zeros((height, width), np.uint8)
-        cv2.putText(m, text, org, OVERLAY_FONT, scale, 255, thickness, cv2.LINE_AA)
-        masks.append(m / 255.0)
-    return masks[0], masks[1]
+    m = np.zeros((height, width), np.uint8)
+    cv2.putText(m, text, org, OVERLAY_FONT, scale, 255, stroke, cv2.LINE_AA)
+    # the outline: the strokes grown on each side (putText's thickness is not a reliable width)
+    reach = (outline - stroke) // 2
+    ring = cv2.dilate(m, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * reach + 1, 2 * reach + 1)))
+    return ring / 255.0, m / 255.0
 
 
 @lru_cache(maxsize=16)

@@ -30,7 +30,6 @@ from __future__ import annotations
 
 import json
 import shutil
-import zlib
 from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 
@@ -75,7 +74,7 @@ JITTER_ROTATION_DEG = 0.7
 JITTER_FOCAL_REL = 0.01
 JITTER_PRINCIPAL_REL = 0.005
 JITTER_K1, JITTER_K2, JITTER_P = 0.02, 0.01, 3e-4
-TILT_STREAM = 97  # third element of the per-camera seed of `camera_tilt_deg` (footage.camera_rng)
+TILT_STREAM = (0, 2)  # the per-camera seed stream of `camera_tilt_deg` (footage.camera_rng)
 MAX_TILT_DEG = 30.0  # largest camera_tilt_deg accepted (the specimen leaves the picture well before)
 OCCLUDER_QUADS = 192  # theta tessellation of the occluder band (chords: < 0.1 px from the exact edge)
 OCCLUDER_ROW_MM = 3.0  # the band is drawn in rows of at most this height (follows the bulge)
@@ -196,9 +195,9 @@ class SimulationConfig:
 # nvr: a 4K surveillance camera recorded by a network video recorder: H.265 at a low bitrate,
 # sensor noise, a soft fixed-focus lens, a lamp on one side, a wide-angle lens's vignetting, the
 # recorder's burned-in date/time and a slowly drifting exposure. Its lens blur is NVR_LENS_BLUR_PX
-# at every image size (a soft fixed-focus lens: 0.7-1.2 px). At 1280 x 720 it nearly closes the
-# 1 px gaps between the membrane's large dots: the independent check, which thresholds, then
-# matches fewer of them (69 % of the membrane's on a 720p test), while the physics is unchanged.
+# at every image size (the issue's 0.7-1.2 px of a soft fixed-focus lens). At 1280 x 720 it
+# nearly closes the 1 px gaps between the membrane's large dots: ../shared/tools/check_sim.py,
+# which thresholds, then matched 69 % of the membrane's on a 720p test (2026-11-25).
 NVR_LENS_BLUR_PX = 1.0
 PRESETS: dict[str, dict] = {
     "clean": {},
@@ -215,23 +214,16 @@ PRESETS: dict[str, dict] = {
 }
 
 
-def preset_settings(name: str) -> dict:
-    """The settings a preset sets (``PRESETS``)."""
-    if name not in PRESETS:
-        raise ValueError(f"preset must be one of {sorted(PRESETS)}, not {name!r}")
-    out = dict(PRESETS[name])
-    return out
-
-
 def apply_preset(d: dict) -> dict:
     """A copy of settings ``d`` with its ``preset`` (if any) expanded: the preset's keys
-    (:func:`preset_settings`), then ``d``'s own keys over
-    them; the ``preset`` key itself is removed."""
+    (``PRESETS``), then ``d``'s own keys over them; the ``preset`` key itself is removed."""
     d = dict(d)
     name = d.pop("preset", None)
     if name is None:
         return d
-    return {**preset_settings(name), **d}
+    if name not in PRESETS:
+        raise ValueError(f"preset must be one of {sorted(PRESETS)}, not {name!r}")
+    return {**PRESETS[name], **d}
 
 
 def _check_effects(cfg: SimulationConfig) -> None:
@@ -774,7 +766,7 @@ class CameraRenderer:
             img = cv2.GaussianBlur(img, (0, 0), cfg.blur_sigma_px)
         if cfg.timestamp_overlay:
             img = footage.draw_timestamp(img, footage.timestamp_text(frame, cfg.fps))
-        rng = np.random.default_rng([cfg.seed, zlib.crc32(cam.name.encode()), frame])
+        rng = footage.camera_rng(cfg.seed, cam.name, (frame,))
         noise = rng.standard_normal(img.shape, dtype=np.float32)
         img = img + cfg.noise_sigma * noise * np.sqrt(np.maximum(img, 1) / 128)  # shot-noise-like
         return np.clip(np.round(img), 0, 255).astype(np.uint8)
@@ -995,7 +987,7 @@ def board_poses(
     ``BOARD_CORNER_INSET_PX`` from both edges at the image corner; the rest of the board runs
     off the image there, so corners are measured where the distortion is strongest.
     """
-    rng = np.random.default_rng([cfg.seed, zlib.crc32(camera.name.encode()), 7])
+    rng = footage.camera_rng(cfg.seed, camera.name, (7,))
     sheet, _ = board_polygons_mm(board)
     sheet_mm = np.c_[sheet, np.zeros(len(sheet))]
     corners_mm = board_corners_mm(board)
@@ -1051,7 +1043,7 @@ def render_calibration(test_dir: str | Path, camera: str, out_dir: str | Path) -
     cam = scene.cameras[camera]
     board = scene.design["board"]
     out_dir.mkdir(parents=True, exist_ok=True)
-    rng = np.random.default_rng([scene.cfg.seed, zlib.crc32(camera.encode()), 11])
+    rng = footage.camera_rng(scene.cfg.seed, camera, (11,))
     n = scene.cfg.calibration_images
     poses = board_poses(scene.cfg, cam, board, n)
     n_whole = n - corner_board_count(n)
