@@ -32,7 +32,9 @@ from triaxtrack.identify import (
     label_frame,
     settle_offsets,
 )
+from triaxtrack.identify.anchors import MAX_PITCH_CHANGE, _anchor_offsets, _MembraneView
 from triaxtrack.identify.cell import _row_pitch_px, _straight_chains
+from triaxtrack.identify.coded import _ct_stripes, _plausible_cts
 from triaxtrack.kit import coded_target_polygons, ct_codes, load_kit_design, target_table
 from triaxtrack.optics import read_cameras
 from triaxtrack.raster import paint
@@ -166,6 +168,65 @@ def test_dots_beside_a_dark_edge_are_flagged():
     assert dots.beside_edge.tolist() == [False, False, False, True]
 
 
+def test_dots_cut_by_the_image_border_are_flagged():
+    """A dot whose ink (grown by a pixel) reaches the image border is cut by it; one two clear
+    pixels inside is not."""
+    img = np.full((60, 80), 200.0)
+    yy, xx = np.mgrid[0:60, 0:80]
+    for u, v in ((1.0, 30.0), (40.0, 30.0), (40.0, 57.0), (40.0, 4.5)):
+        img[(xx - u) ** 2 + (yy - v) ** 2 <= 2.2**2] = 30.0
+    blobs = detect_blobs(img.astype(np.uint8), DetectParams(background_px=16)).sort_values(["v_px", "u_px"])
+    assert len(blobs) == 4
+    assert blobs.at_border.tolist() == [False, True, False, True]
+
+
+def test_a_stripes_cts_far_from_its_run_are_dropped(kit):
+    """Two CTs misread as pedestal CTs 1 and 2 (each other's support) far from the run of that
+    stripe's decoded CTs are dropped; the run, and a run of another stripe, are kept."""
+    design, _, _ = kit
+    stripes = _ct_stripes(design)
+    ped, cell = (
+        min(t for t, s in stripes.items() if s[0] == name) for name in ("pedestal_top", "cell_top_ct")
+    )
+    rows = [(ped + k, 400.0 + 40 * k, 200.0) for k in range(2, 7)]  # the top pedestal's run
+    rows += [(cell + k, 380.0 + 40 * k, 60.0) for k in range(6)]  # the cell's top band
+    rows += [(ped, 300.0, 560.0), (ped + 1, 340.0, 560.0)]  # misread on the bottom band
+    cts = pd.DataFrame(rows, columns=["id", "u_px", "v_px"]).assign(extent_px=15.0)
+    kept = _plausible_cts(cts, design)
+    assert sorted(kept.id) == sorted(t for t, _, _ in rows[:-2])
+    # two equally large runs of one stripe: neither is trusted
+    two = pd.concat([cts.iloc[:5], cts.iloc[:5].assign(id=cts.id.iloc[:5] + 8, v_px=600.0)])
+    assert not _plausible_cts(two, design).id.isin(cts.id.iloc[:5]).any()
+
+
+@pytest.mark.parametrize("rows_below", [0, 8])
+def test_rows_are_counted_from_a_pedestal_face_only_nearby(kit, rows_below):
+    """A region's rows are read from a bottom pedestal CT with the pitch of the column's dots
+    nearest it; when those are more rows from the face than MAX_PITCH_CHANGE allows (the pitch
+    of a strained membrane changes along its height) the CT does not fix the region."""
+    design, _, _ = kit
+    m = design["membrane"]
+    z_from_face = design["pedestal_targets"]["stripes"][0]["z_from_face"]
+    rc = design["coded_target"]["centre_radius"]
+    s, pitch, col = 3.0, 2.37, 3.5  # px/mm, row and column pitch (mm)
+    nodes = np.array([(i, j) for i in range(10) for j in range(12)])
+    pos = np.c_[100 + nodes[:, 1] * col * s, 100 + nodes[:, 0] * pitch * s].astype(float)
+    grid = {(int(i), int(j)): k for k, (i, j) in enumerate(nodes)}
+    jc = 4  # a larger-dot column (phase 0) under the CT
+    ct = np.array([100 + jc * col * s, pos[:, 1].max() + (pitch / 2 + z_from_face + rows_below * pitch) * s])
+    r_first = m["rows"] + 0.5 - (0.5 + rows_below)  # the truth: the last grid row's design row
+    phase = ((m["large_first"] - int(r_first - 9)) % m["large_step"], (jc - 0) % m["large_step"])
+    an = _Anchor(1, None, (ct, np.eye(2) * rc * s))
+    ctx = _MembraneView(axis_point=pos.mean(axis=0), q_max=1.0, proud_mm=3.0, column_mm=col)
+    p = IdentifyParams()
+    got = _anchor_offsets(an, grid, nodes, pos, phase, pos, design, p, ctx)
+    assert (rows_below + 0.5) * MAX_PITCH_CHANGE > p.row_tolerance or rows_below == 0
+    if rows_below == 0:
+        assert got is not None and got[1] == int(r_first - 9)
+    else:
+        assert got is None
+
+
 def test_dots_along_a_dark_edge_are_recentred_against_the_gaps():
     """A longitudinal stripe seen edge-on: dots 2.4 x 5 px, 8 px apart, their centres 3 px from
     the dark beyond the band, blurred. The blobs' centroids lean towards the dark by 0.07 px;
@@ -291,6 +352,26 @@ def test_columns_hidden_by_a_band_counted_from_the_spacing_row_by_row(kit):
                 continue  # the facing column's lower rows are hidden
             beyond[(r - 3, c - 20)] = len(pos)
             pos.append((221.0 + 5.0 * (c - 23) + 0.3 * (8.0 * r - 120.0), 8.0 * r))
+    phase = ((m["large_first"] - 3) % m["large_step"], (m["large_first"] - 20) % m["large_step"])
+    got = _bridge(beyond, phase, fixed, (0, 0), np.asarray(pos), np.array([0.0, 1.0]), design)
+    assert got == (20, 3)
+
+
+def test_a_sparse_column_beside_a_band_is_passed_over(kit):
+    """The region's column facing the band holds three dots (broken up beside the band): the
+    rows are matched from the next column in, and the hidden columns counted from there."""
+    design = kit[0]
+    m = design["membrane"]
+    pos, fixed, beyond = [], {}, {}
+    for r in range(5, 26):
+        for c in range(10, 20):
+            fixed[(r, c)] = len(pos)
+            pos.append((10.0 * c, 8.0 * r))
+        for c in range(23, 27):
+            if c == 23 and r not in (8, 14, 20):
+                continue
+            beyond[(r - 3, c - 20)] = len(pos)
+            pos.append((10.0 * c, 8.0 * r))
     phase = ((m["large_first"] - 3) % m["large_step"], (m["large_first"] - 20) % m["large_step"])
     got = _bridge(beyond, phase, fixed, (0, 0), np.asarray(pos), np.array([0.0, 1.0]), design)
     assert got == (20, 3)

@@ -77,7 +77,8 @@ class DetectParams:
 EDGE_RADIUS_PX = 3  # a dot with non-dot dark ink this close (L2, pixel centres) is beside an edge
 BLOB_COLUMNS = [
     "u_px", "v_px", "area_px", "major_px", "minor_px", "angle_rad", "roundness", "fill",
-    "contrast", "background", "cov_uu", "cov_uv", "cov_vv", "beside_edge", "split", "blur",
+    "contrast", "background", "cov_uu", "cov_uv", "cov_vv", "beside_edge", "at_border",
+    "split", "blur",
 ]  # fmt: skip
 
 
@@ -258,6 +259,10 @@ def _detect(g: np.ndarray, p: DetectParams, smooth_px: float, sigma: float = 0.0
     # contrast-weighted centroid over the blob grown by one pixel (edge pixels partly covered)
     grown = cv2.dilate(labels.astype(np.float32), np.ones((3, 3), np.uint8)).astype(np.int32)
     grown = np.where(labels > 0, labels, grown)
+    # a blob whose grown pixels reach the image border is cut by it: its centroid is biased
+    rim = np.concatenate([grown[0], grown[-1], grown[:, 0], grown[:, -1]])
+    at_border = np.zeros(n, bool)
+    at_border[rim] = True
     wts = np.clip(contrast, 0, None)
     cen = _label_sums(grown, n, wts)
     idx = np.nonzero(keep)[0]
@@ -282,6 +287,7 @@ def _detect(g: np.ndarray, p: DetectParams, smooth_px: float, sigma: float = 0.0
         "cov_uv": cuv,
         "cov_vv": cvv,
         "beside_edge": _beside_edge(components, area, geo, p)[idx],
+        "at_border": at_border[idx],
         "split": piece[idx],
     })  # fmt: skip
 

@@ -57,6 +57,12 @@ def _width_ratio(ellipse_map: np.ndarray, down: np.ndarray) -> float:
 
 MIN_OVERRULING_PAIRS = 2  # pedestal CT pairs that agree on a region overrule single CTs
 MAX_TAN_PHI = 3.0  # beyond about 72 degrees off a CT's normal, its parallax is not trusted
+# the row pitch of a strained membrane changes along its height (bulging, end restraint: up to
+# about 20 % between the end rows and the middle at 10 % axial strain), so a column's row read
+# from a pedestal face with the pitch of its nearest dots is off by up to this share of the rows
+# between them and the face: it is trusted only while that stays within the row tolerance (at
+# 10 % strain, 25.6 rows read 4.4 rows off and gave 828 wrong IDs)
+MAX_PITCH_CHANGE = 0.2
 
 
 @dataclass(frozen=True)
@@ -159,6 +165,8 @@ def _anchor_offsets(an: _Anchor, grid, nodes, xy, phase, pos, design, p, ctx) ->
             continue  # the column's end rows are not all there
         pitch = float(np.median(np.abs(np.diff(d_mm[order]))))
         rows_from_face = (d_mm[order[0]] - z_from_face) / pitch
+        if rows_from_face * MAX_PITCH_CHANGE > p.row_tolerance:
+            continue  # the column's nearest dots are too far from the face to count rows
         r_first = 0.5 + rows_from_face if sign > 0 else m["rows"] + 0.5 - rows_from_face
         estimates.append(float(r_first - i_col[order[0]]))
     if not estimates:

@@ -51,10 +51,22 @@ def _ct_stripes(design: dict) -> dict[int, tuple[str, int, int]]:
     return out
 
 
+# CTs of one stripe are linked as one run when their IDs differ by at most this many steps
+# (a CT between them hidden or not decoded) and their images are at most this many label radii
+# apart per step: along a stripe the CTs are 2.3-2.4 label radii apart (pedestal: 15.7 mm, cell
+# wall: 16.1 mm, label radius 6.8 mm), closer when foreshortened
+RUN_MAX_STEPS = 3
+RUN_RADII_PER_STEP = 3.0
+
+
 def _plausible_cts(cts: pd.DataFrame, design: dict) -> pd.DataFrame:
-    """Drop CTs whose place in the image contradicts their ID: among a CT's two nearest decoded
-    CTs there must be one of its own stripe whose ID is at most two steps away (a misread
-    partly hidden target decodes to a valid but far-away code)."""
+    """Drop CTs whose place in the image contradicts their ID (a misread, partly hidden target
+    decodes to a valid but far-away code). Among a CT's two nearest decoded CTs there must be
+    one of its own stripe whose ID is at most two steps away; and a stripe's CTs seen in one
+    image form one run (:data:`RUN_MAX_STEPS`, :data:`RUN_RADII_PER_STEP`): CTs outside the
+    stripe's largest run are dropped, all of them when two runs are equally large (on a 720p
+    test two cell-wall CTs beside a stripe's end read as pedestal CTs 1 and 2, each other's
+    support)."""
     if len(cts) < 3:
         return cts
     stripes = _ct_stripes(design)
@@ -69,7 +81,31 @@ def _plausible_cts(cts: pd.DataFrame, design: dict) -> pd.DataFrame:
             steps = (int(ids[b]) - int(ids[a])) % count
             if nb == name and min(steps, count - steps) <= 2:
                 keep[a] = True
+    keep &= _in_main_run(ids, uv, cts.extent_px.to_numpy(float), stripes)
     return cts[keep].reset_index(drop=True)
+
+
+def _in_main_run(ids: np.ndarray, uv: np.ndarray, extent: np.ndarray, stripes: dict) -> np.ndarray:
+    """Which CTs belong to the largest run of their stripe (see :func:`_plausible_cts`)."""
+    from scipy.sparse.csgraph import connected_components
+
+    names = np.array([stripes[int(t)][0] for t in ids])
+    count = np.array([stripes[int(t)][2] for t in ids])
+    steps = np.abs(ids[:, None] - ids[None, :]) % count[:, None]
+    steps = np.minimum(steps, count[:, None] - steps)
+    dist = np.linalg.norm(uv[:, None] - uv[None, :], axis=2)
+    reach = RUN_RADII_PER_STEP * np.maximum(extent[:, None], extent[None, :]) * steps
+    linked = (names[:, None] == names[None, :]) & (steps <= RUN_MAX_STEPS) & (dist <= reach)
+    _, run = connected_components(linked, directed=False)
+    size = np.bincount(run)[run]
+    out = np.zeros(len(ids), bool)
+    for name in np.unique(names):
+        sel = np.nonzero(names == name)[0]
+        largest = size[sel].max()
+        runs = np.unique(run[sel][size[sel] == largest])
+        if len(runs) == 1:
+            out[sel] = run[sel] == runs[0]
+    return out
 
 
 def _theta_dir(ct_id: int, first: int, count: int, centres: dict) -> np.ndarray | None:

@@ -135,18 +135,19 @@ def _bridge(grid, phase, other, other_off, pos, axis, design) -> tuple[int, int]
     a_col = {int(j): float(np.median(a_xy[a_nodes[:, 1] == j] @ right)) for j in np.unique(a_nodes[:, 1])}
     b_col = {int(j): float(np.median(b_xy[b_nodes[:, 1] == j] @ right)) for j in np.unique(b_nodes[:, 1])}
     # grid columns run along `right` (see _seed_grid): the facing ones are the extreme columns
-    ja = min(a_col) if side > 0 else max(a_col)
-    jb = max(b_col) if side > 0 else min(b_col)
-    ja2, jb2 = ja + int(side), jb - int(side)  # one column further in, to measure the spacing
-    if ja2 not in a_col or jb2 not in b_col:
+    # with enough rows (a sparse outer column, broken up beside the band, is passed over)
+    ja = _facing_column(grid, min(a_col) if side > 0 else max(a_col), int(side))
+    jb = _facing_column(other, max(b_col) if side > 0 else min(b_col), -int(side))
+    if ja is None or jb is None:
         return None
+    ja2, jb2 = ja + int(side), jb - int(side)  # one column further in, to measure the spacing
     # each row's facing dot and its slope there (from the next column in), extrapolated to the
     # middle of the gap from both sides: a row images as an arc, and extrapolating its tangent
     # by the same distance from either side cancels the arc's curvature
     mid = 0.5 * (a_col[ja] + b_col[jb])
     ends_a = _row_ends(grid, pos, ja, ja2, axis, right, mid)
     ends_b = _row_ends(other, pos, jb, jb2, axis, right, mid)
-    if len(ends_a) < 5 or len(ends_b) < 5:
+    if len(ends_a) < BRIDGE_MIN_ROWS or len(ends_b) < BRIDGE_MIN_ROWS:
         return None
     ib = np.array(list(ends_b))
     zb = np.array([ends_b[i][0] for i in ib])
@@ -157,7 +158,7 @@ def _bridge(grid, phase, other, other_off, pos, axis, design) -> tuple[int, int]
         if abs(zb[k] - z) < 0.35 * pitch:
             shifts.append(int(ib[k]) - i)
             gaps.append(gap_a + ends_b[int(ib[k])][1])
-    if len(shifts) < 5:
+    if len(shifts) < BRIDGE_MIN_ROWS:
         return None
     values, counts = np.unique(shifts, return_counts=True)
     if counts.max() < 0.8 * len(shifts):
@@ -180,6 +181,20 @@ def _bridge(grid, phase, other, other_off, pos, axis, design) -> tuple[int, int]
         return None
     c_off = int((c_b + side * fits[0] - ja) % m["columns"])
     return c_off, r_off
+
+
+BRIDGE_MIN_ROWS = 5  # rows matched across a band to fix a region from its neighbour
+BRIDGE_MAX_INWARD = 2  # columns a facing column may lie in from a region's extreme one
+
+
+def _facing_column(grid: dict, extreme: int, inward: int) -> int | None:
+    """The column nearest a band, from ``extreme`` (the region's outermost) ``inward`` (+1 or -1),
+    whose rows have ``BRIDGE_MIN_ROWS`` dots beside the next column in; None if none within
+    ``BRIDGE_MAX_INWARD`` columns."""
+    for j in range(extreme, extreme + inward * (BRIDGE_MAX_INWARD + 1), inward):
+        if sum((i, j + inward) in grid for i, jj in grid if jj == j) >= BRIDGE_MIN_ROWS:
+            return j
+    return None
 
 
 def _row_ends(
