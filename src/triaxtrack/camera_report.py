@@ -7,13 +7,19 @@
   ``centroid_sigma_p95``, ``tracked_share``; item = camera).
 * :func:`camera_summary`, :func:`format_camera_summary`: one line per camera of a score table:
   coverage (min / median over its labelled frames, needs the truth), sigma_px, tracked share.
-* :func:`camera_quality_plot`: the report's figure of :func:`camera_quality`.
+* :func:`camera_quality_figure` (:func:`camera_quality_plot` as an image): the report's figure of
+  :func:`camera_quality` (matplotlib).
 """
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 import pandas as pd
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 QUALITY_COLUMNS = [
     "camera", "labelled_frames", "labelled_median", "target_frames", "reported", "tracked_share",
@@ -124,32 +130,48 @@ def format_camera_summary(summary: pd.DataFrame) -> str:
     return "\n".join(lines)
 
 
-def camera_quality_plot(quality: pd.DataFrame, width: int = 900) -> np.ndarray:
-    """Two panels of a :func:`camera_quality` table as a BGR image: per camera, the share of its
-    labelled targets' frames that tracking reported (%; under each camera the median number of
-    targets labelled per chunk start), and the reported centroids' uncertainty ``sigma_px``
+def camera_quality_figure(quality: pd.DataFrame, width_px: int = 900) -> Figure:
+    """Two panels of a :func:`camera_quality` table (matplotlib, Agg): per camera, the share of
+    its labelled targets' frames that tracking reported (%; under each camera the median number
+    of targets labelled per chunk start), and the reported centroids' uncertainty ``sigma_px``
     (median, and up to the 95th percentile; px)."""
-    from triaxtrack.report import PALETTE, bar_chart
+    from triaxtrack.report.figures import PANEL_PX, draw_bars  # matplotlib only when drawing
+    from triaxtrack.report.style import PALETTE, new_figure, report_style
 
     cams = quality["camera"].astype(str).tolist()
     share = 100 * quality["tracked_share"].to_numpy(float)
     med, p95 = quality["sigma_median_px"].to_numpy(float), quality["sigma_p95_px"].to_numpy(float)
     labelled = quality["labelled_median"].to_numpy(float)
-    top = bar_chart(
-        cams,
-        [("", share, PALETTE[2])],
-        "share of labelled target-frames tracked per camera (below: targets labelled per chunk start)",
-        "tracked (%)",
-        (width, 340),
-        annotate=["n/a" if not np.isfinite(s) else f"{s:.1f}" for s in share],
-        sublabels=["" if not np.isfinite(n) else f"{n:.0f}" for n in labelled],
-    )
-    bottom = bar_chart(
-        cams,
-        [("median", med, PALETTE[0]), ("to 95th pct.", np.clip(p95 - med, 0, None), PALETTE[9])],
-        "centroid uncertainty of the tracked observations per camera (median / 95th percentile)",
-        "sigma (px)",
-        (width, 340),
-        annotate=["n/a" if not np.isfinite(m) else f"{m:.2f}/{p:.2f}" for m, p in zip(med, p95, strict=True)],
-    )
-    return np.vstack([top, bottom])
+    with report_style():
+        fig = new_figure(width_px, 2 * PANEL_PX["bars"])
+        top, bottom = fig.subplots(2, 1)
+        draw_bars(
+            top,
+            cams,
+            [("", share, PALETTE[2])],
+            title="share of labelled target-frames tracked per camera (under each camera: median targets "
+            "labelled per chunk start)",
+            ylabel="tracked (%)",
+            annotate=["n/a" if not np.isfinite(s) else f"{s:.1f}" for s in share],
+            sublabels=["" if not np.isfinite(n) else f"{n:.0f}" for n in labelled],
+        )
+        draw_bars(
+            bottom,
+            cams,
+            [("median", med, PALETTE[0]), ("to 95th percentile", np.clip(p95 - med, 0, None), PALETTE[9])],
+            title="centroid uncertainty of the tracked observations per camera (median / 95th percentile)",
+            ylabel="sigma_px (px)",
+            annotate=[
+                "n/a" if not np.isfinite(m) else f"{m:.2f}/{p:.2f}" for m, p in zip(med, p95, strict=True)
+            ],
+        )
+        for ax in (top, bottom):
+            ax.set_xlabel("camera")
+    return fig
+
+
+def camera_quality_plot(quality: pd.DataFrame, width_px: int = 900) -> np.ndarray:
+    """:func:`camera_quality_figure` drawn as a (H, W, 3) uint8 BGR image."""
+    from triaxtrack.report.style import figure_image
+
+    return figure_image(camera_quality_figure(quality, width_px))

@@ -1,51 +1,31 @@
-"""Pictures for a person to check, drawn with OpenCV (no plotting library is a dependency).
+"""Pictures for a person to check, drawn with matplotlib (Agg, never pyplot).
 
 :func:`draw_reconstruction` is the paper's Figs. 5 and 6 in one image: the cameras around the
 cell, the cell-wall and specimen points, and the traced rays of one membrane dot, seen from
 above (left), from the side (middle) and from above again, close up on the cell, where the rays
-bend at the two walls (right). Orthographic views of the cell frame, millimetres.
+bend at the two walls (right). Orthographic views of the cell frame, millimetres, equal scales
+on both axes of a view.
 """
 
 from __future__ import annotations
 
-import cv2
 import numpy as np
 import pandas as pd
+from matplotlib.axes import Axes
+from matplotlib.collections import PathCollection
+from matplotlib.patches import Circle
 
 from triaxtrack.optics import Camera, CellOptics, pixels_to_normalized, trace_into_water
 
-PANEL_PX = 720  # each view is PANEL_PX x PANEL_PX
+PANEL_PX = 720  # each view is about PANEL_PX x PANEL_PX
+TITLE_PX = 40
 MARGIN_MM = 40.0
-WHITE = (255, 255, 255)
-GREY = (150, 150, 150)
-CELL = (200, 160, 90)  # BGR
-CAMERA = (40, 40, 220)
-RAY = (0, 170, 255)
-TEXT = (30, 30, 30)
-
-
-class _View:
-    """Maps two cell-frame coordinates (mm) to pixels of one panel (y of the image downwards)."""
-
-    def __init__(self, lo: np.ndarray, hi: np.ndarray):
-        self.scale = (PANEL_PX - 40) / float(np.max(hi - lo))
-        self.lo = lo
-
-    def __call__(self, ab: np.ndarray) -> np.ndarray:
-        ab = np.atleast_2d(ab)
-        x = 20 + (ab[:, 0] - self.lo[0]) * self.scale
-        y = PANEL_PX - 20 - (ab[:, 1] - self.lo[1]) * self.scale
-        return np.c_[x, y].round().astype(np.int32)
-
-
-def _pt(p: np.ndarray) -> tuple[int, int]:
-    return int(p[0]), int(p[1])
-
-
-def _z_colour(z: np.ndarray, z0: float, z1: float) -> np.ndarray:
-    """BGR colours of heights: blue at z0 to red at z1."""
-    f = np.clip((z - z0) / max(z1 - z0, 1e-9), 0, 1)
-    return np.c_[255 * (1 - f), 60 + 80 * np.sin(np.pi * f), 255 * f].astype(int)
+AXIS_ARROW_MM = 40.0  # the drawn length of a camera's optical axis
+CELL = "#5aa0c8"
+CELL_TARGETS = "#969696"
+CAMERA = "#dc2828"
+RAY = "#ff9f00"
+HEIGHTS_CMAP = "viridis"  # the specimen's points by height
 
 
 def traced_rays(
@@ -64,6 +44,44 @@ def traced_rays(
     return paths
 
 
+def _draw_view(
+    ax: Axes,
+    cols: list[int],
+    cameras: dict[str, Camera],
+    xyz: np.ndarray,
+    is_cell: np.ndarray,
+    cell: CellOptics,
+    rays: list[np.ndarray],
+    point_mm: np.ndarray | None,
+    z_range: tuple[float, float],
+) -> PathCollection:
+    """One orthographic view of the cell frame's axes ``cols`` ([0, 1] from above, [0, 2] from
+    the side) into ``ax``: walls, cell-wall targets, specimen points by height, cameras, rays."""
+    top = cols == [0, 1]
+    for r in (cell.outer_radius, cell.inner_radius):
+        if top:
+            ax.add_patch(Circle((0.0, 0.0), r, fill=False, color=CELL, lw=1.0))
+        else:
+            for x in (-r, r):
+                ax.plot([x, x], [cell.z_min, cell.z_max], color=CELL, lw=1.0)
+    ax.scatter(*xyz[is_cell][:, cols].T, s=2, color=CELL_TARGETS, label="cell-wall targets")
+    dots = ax.scatter(*xyz[~is_cell][:, cols].T, s=2, c=xyz[~is_cell, 2], cmap=HEIGHTS_CMAP,
+                      vmin=z_range[0], vmax=z_range[1], label="specimen and pedestal targets")  # fmt: skip
+    for k, cam in enumerate(cameras.values()):
+        tip = cam.center + AXIS_ARROW_MM * cam.R[2]  # the optical axis
+        a, b = cam.center[cols], tip[cols]
+        ax.annotate("", xy=b, xytext=a, arrowprops={"arrowstyle": "->", "color": CAMERA, "lw": 1.5})
+        ax.plot(*a, "o", color=CAMERA, ms=3, label="cameras (optical axis)" if k == 0 else None)
+        ax.annotate(cam.name, a, xytext=(4, 4), textcoords="offset points", fontsize=7)
+    if point_mm is not None:
+        for k, path in enumerate(rays):
+            poly = np.vstack([path, np.asarray(point_mm, float)])
+            ax.plot(*poly[:, cols].T, color=RAY, lw=0.8, label="traced rays" if k == 0 else None)
+    ax.set_aspect("equal")
+    ax.set(xlabel="x (mm)", ylabel="y (mm)" if top else "z (mm)")
+    return dots
+
+
 def draw_reconstruction(
     cameras: dict[str, Camera],
     points: pd.DataFrame,
@@ -72,57 +90,38 @@ def draw_reconstruction(
     point_mm: np.ndarray | None,
     title: str = "",
 ) -> np.ndarray:
-    """A BGR image: top view (x, y), side view (x, z) and a close top view of the cell.
+    """A BGR image (matplotlib): top view (x, y), side view (x, z) and a close top view of the
+    cell, in mm.
 
     ``points``: ``id, x_mm, y_mm, z_mm`` (cell-wall targets grey, the others coloured by
     height); ``rays``: from :func:`traced_rays`, each drawn on to ``point_mm``.
     """
+    from triaxtrack.report.style import figure_image, new_figure, report_style
+
     centres = np.array([c.center for c in cameras.values()]).reshape(-1, 3)
     xyz = points[["x_mm", "y_mm", "z_mm"]].to_numpy(float)
     reach = max(np.abs(centres[:, :2]).max(initial=0), cell.outer_radius) + MARGIN_MM
     zlo = min(xyz[:, 2].min(initial=0), centres[:, 2].min(initial=0)) - MARGIN_MM
     near = cell.outer_radius + MARGIN_MM / 4
-    wide = _View(np.array([-reach, -reach]), np.array([reach, reach]))
-    side = _View(np.array([-reach, zlo]), np.array([reach, zlo + 2 * reach]))
-    close = _View(np.array([-near, -near]), np.array([near, near]))
-    panels = [
-        ("top view (x right, y up)", wide, [0, 1]),
-        ("side view (x right, z up)", side, [0, 2]),
-        ("the cell from above: rays refract at both walls", close, [0, 1]),
-    ]
     is_cell = np.hypot(xyz[:, 0], xyz[:, 1]) > (cell.inner_radius + cell.outer_radius) / 2
     zin = xyz[~is_cell, 2]
-    colours = _z_colour(zin, zin.min(initial=0), zin.max(initial=1))
-    images = []
-    for label, view, cols in panels:
-        img = np.full((PANEL_PX, PANEL_PX, 3), 255, np.uint8)
-        for r in (cell.outer_radius, cell.inner_radius):
-            if cols == [0, 1]:
-                cv2.circle(img, _pt(view(np.zeros(2))[0]), int(round(r * view.scale)), CELL, 1, cv2.LINE_AA)
-            else:
-                for x in (-r, r):
-                    a, b = view(np.array([[x, cell.z_min], [x, cell.z_max]]))
-                    cv2.line(img, _pt(a), _pt(b), CELL, 1, cv2.LINE_AA)
-        for p in view(xyz[is_cell][:, cols]):
-            cv2.circle(img, _pt(p), 1, GREY, -1)
-        for p, c in zip(view(xyz[~is_cell][:, cols]), colours, strict=True):
-            cv2.circle(img, _pt(p), 1, tuple(int(v) for v in c), -1)
-        for cam in cameras.values():
-            tip = cam.center + 40.0 * cam.R[2]  # the optical axis, 40 mm
-            a, b = view(np.array([cam.center[cols], tip[cols]]))
-            cv2.arrowedLine(img, _pt(a), _pt(b), CAMERA, 2, cv2.LINE_AA)
-            cv2.putText(img, cam.name, _pt(a + 6), cv2.FONT_HERSHEY_SIMPLEX, 0.35, TEXT, 1)
-        if point_mm is not None:
-            for path in rays:
-                poly = np.vstack([path, np.asarray(point_mm, float)])
-                cv2.polylines(img, [view(poly[:, cols])], False, RAY, 1, cv2.LINE_AA)
-        cv2.putText(img, label, (10, 18), cv2.FONT_HERSHEY_SIMPLEX, 0.5, TEXT, 1)
-        cv2.line(img, (PANEL_PX - 1, 0), (PANEL_PX - 1, PANEL_PX), GREY, 1)
-        images.append(img)
-    out = np.hstack(images)
-    if title:
-        cv2.putText(out, title, (10, PANEL_PX - 8), cv2.FONT_HERSHEY_SIMPLEX, 0.45, TEXT, 1)
-    return out
+    z_range = (float(zin.min(initial=0)), float(zin.max(initial=1)))
+    panels = [
+        ("top view (x right, y up)", [0, 1], (-reach, reach), (-reach, reach)),
+        ("side view (x right, z up)", [0, 2], (-reach, reach), (zlo, zlo + 2 * reach)),
+        ("the cell from above: rays refract at both walls", [0, 1], (-near, near), (-near, near)),
+    ]
+    with report_style():
+        fig = new_figure(3 * PANEL_PX, PANEL_PX + TITLE_PX)
+        axes = fig.subplots(1, 3)
+        for ax, (label, cols, xlim, ylim) in zip(axes, panels, strict=True):
+            dots = _draw_view(ax, cols, cameras, xyz, is_cell, cell, rays, point_mm, z_range)
+            ax.set(title=label, xlim=xlim, ylim=ylim)
+        axes[0].legend(loc="lower left", markerscale=3)
+        fig.colorbar(dots, ax=list(axes), label="z of the specimen's targets (mm)", shrink=0.8)
+        if title:
+            fig.suptitle(title)
+    return figure_image(fig)
 
 
 def reconstruction_picture(

@@ -16,7 +16,7 @@
 rule report_figures:
     """Volume and strains against time, local strain maps at a few times, reprojection error
     per camera, tracking losses and footage quality per camera of one test, as PNG figures for
-    the report.
+    the report (matplotlib); the membrane grid (rows, columns, IDs) is the test's kit.
     """
     input:
         volume="results/{test}/volume.parquet",
@@ -24,6 +24,7 @@ rule report_figures:
         quality="results/{test}/quality.json",
         tracking="results/{test}/tracking.parquet",
         labels="results/{test}/labels.parquet",
+        kit=get_test_kit,
     output:
         volume_strain=report(
             "results/{test}/report/volume_strain.png",
@@ -78,6 +79,7 @@ rule specimen_movie:
     input:
         points="results/{test}/points.parquet",
         strains="results/{test}/strains.parquet",
+        kit=get_test_kit,
     output:
         movie=report(
             "results/{test}/report/specimen.mp4",

@@ -1,23 +1,26 @@
 """Rule report_figures: the report's PNG figures of one test (volume and strains, strain maps,
-reprojection error, tracking losses, footage quality per camera)."""
+reprojection error, tracking losses, footage quality per camera), drawn with matplotlib."""
 
 import json
 
-import cv2
-
-from triaxtrack.camera_report import camera_quality, camera_quality_plot
+from triaxtrack.camera_report import camera_quality, camera_quality_figure
+from triaxtrack.kit import load_kit_design
 from triaxtrack.logs import log_to
 from triaxtrack.report import (
     chosen_frames,
-    reprojection_plot,
-    strain_maps,
-    tracking_plot,
-    volume_strain_plot,
+    membrane_layout,
+    reprojection_figure,
+    save_figure,
+    strain_maps_figure,
+    tracking_figure,
+    volume_strain_figure,
 )
 from triaxtrack.tables import LABELS, STRAINS, TRACKS, VOLUME, read_table
 
 log_to(snakemake.log[0])
 
+layout = membrane_layout(load_kit_design(snakemake.input.kit))
+print(f"kit: {layout.describe()}")
 volume = read_table(snakemake.input.volume, VOLUME)
 strains = read_table(snakemake.input.strains, STRAINS)
 with open(snakemake.input.quality) as f:
@@ -28,14 +31,10 @@ print(cameras.to_string(index=False))
 
 frames = chosen_frames(strains["frame"].unique(), snakemake.params.strain_map_frames)
 print(f"strain maps at frames {frames}")
-figures = {
-    snakemake.output.volume_strain: volume_strain_plot(volume),
-    snakemake.output.strain_maps: strain_maps(strains, frames),
-    snakemake.output.reprojection: reprojection_plot(quality),
-    snakemake.output.tracking: tracking_plot(tracks),
-    snakemake.output.cameras: camera_quality_plot(cameras),
-}
-for path, image in figures.items():
-    if not cv2.imwrite(path, image):
-        raise OSError(f"cannot write {path}")
-    print(f"{path}: {image.shape[1]} x {image.shape[0]} px")
+out = snakemake.output
+save_figure(volume_strain_figure(volume), out.volume_strain)
+save_figure(strain_maps_figure(strains, layout, frames), out.strain_maps)
+save_figure(reprojection_figure(quality), out.reprojection)
+save_figure(tracking_figure(tracks, layout), out.tracking)
+save_figure(camera_quality_figure(cameras), out.cameras)
+print(f"figures written: {', '.join(out)}")

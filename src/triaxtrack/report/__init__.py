@@ -1,0 +1,73 @@
+"""Figures and a movie for the workflow's HTML report.
+
+Charts are drawn by matplotlib (Agg, never pyplot or a display): every ``*_figure`` function
+takes tables (or ``quality.json`` as a dict) and returns a new :class:`matplotlib.figure.Figure`,
+and its ``*_plot`` (or :func:`strain_map`, :func:`strain_maps`) twin returns the same figure
+drawn as a (H, W, 3) uint8 BGR image; :func:`save_figure` writes a figure as PNG. Nothing here
+reads or writes files except :func:`save_figure`, :func:`write_movie` and
+:func:`write_movie_page`, which write the one file they are given.
+
+* :func:`volume_strain_figure`: volume change (with its uncertainty band) and the specimen
+  strains against time, and the share of membrane dots measured.
+* :func:`strain_map_figure`, :func:`strain_maps_figure`: local membrane strain on the unrolled
+  membrane, with colour bars.
+* :func:`reprojection_figure`: mean reprojection error per camera (and per frame if given).
+* :func:`tracking_figure`: share of the kit's membrane dots and of the other targets reported
+  per frame, losses by reason, per camera.
+* :func:`specimen_frames`, :func:`write_movie`, :func:`write_movie_page`: the deforming
+  specimen seen from the side, as an H.264 MP4 and as a self-contained HTML player.
+* :func:`chosen_frames`: a few frames spread over the test.
+* :func:`membrane_layout`: the kit's membrane grid (rows, columns, IDs, design coordinates),
+  which every figure and the movie read instead of constants.
+
+Conventions: strains of ``volume`` are compression positive, those of ``strains`` (local
+Green-Lagrange) tension positive, as in :mod:`triaxtrack.tables`; both are drawn in per cent.
+Colour scales of signed quantities are diverging and symmetric about zero: blue negative, red
+positive.
+"""
+
+from triaxtrack.report.common import chosen_frames
+from triaxtrack.report.figures import (
+    LOSS_REASONS,
+    REASON_COLOURS,
+    REPORTED,
+    draw_bars,
+    reprojection_figure,
+    reprojection_plot,
+    tracking_figure,
+    tracking_plot,
+    volume_strain_figure,
+    volume_strain_plot,
+)
+from triaxtrack.report.layout import MembraneLayout, membrane_layout
+from triaxtrack.report.maps import strain_map, strain_map_figure, strain_maps, strain_maps_figure
+from triaxtrack.report.movie import DIVERGING, specimen_frames, write_movie, write_movie_page
+from triaxtrack.report.style import DIVERGING_CMAP, PALETTE, figure_image, save_figure
+
+__all__ = [
+    "DIVERGING",
+    "DIVERGING_CMAP",
+    "LOSS_REASONS",
+    "PALETTE",
+    "REASON_COLOURS",
+    "REPORTED",
+    "MembraneLayout",
+    "chosen_frames",
+    "draw_bars",
+    "figure_image",
+    "membrane_layout",
+    "reprojection_figure",
+    "reprojection_plot",
+    "save_figure",
+    "specimen_frames",
+    "strain_map",
+    "strain_map_figure",
+    "strain_maps",
+    "strain_maps_figure",
+    "tracking_figure",
+    "tracking_plot",
+    "volume_strain_figure",
+    "volume_strain_plot",
+    "write_movie",
+    "write_movie_page",
+]
