@@ -335,6 +335,23 @@ def test_region_beyond_a_band_is_fixed_along_curved_rows(kit):
     assert got == (20, 3)
 
 
+def _patches_across_a_band(facing_rows, x_beyond) -> tuple[dict, dict, np.ndarray]:
+    """A fixed patch (rows 5-25, columns 10-19, 10 px apart; offsets (0, 0)) and, beyond a band
+    hiding columns 20-22, columns 23-26 at ``x_beyond(c, r)`` (grid node (r - 3, c - 20)); the
+    facing column 23 only on the rows where ``facing_rows(r)``."""
+    pos, fixed, beyond = [], {}, {}
+    for r in range(5, 26):
+        for c in range(10, 20):
+            fixed[(r, c)] = len(pos)
+            pos.append((10.0 * c, 8.0 * r))
+        for c in range(23, 27):
+            if c == 23 and not facing_rows(r):
+                continue
+            beyond[(r - 3, c - 20)] = len(pos)
+            pos.append((x_beyond(c, r), 8.0 * r))
+    return fixed, beyond, np.asarray(pos)
+
+
 def test_columns_hidden_by_a_band_counted_from_the_spacing_row_by_row(kit):
     """Beyond a band, towards a silhouette, columns lie 5 px apart (10 px on the fixed side) and
     slant; the column facing the band is seen on its upper rows only. The medians of the two
@@ -342,19 +359,11 @@ def test_columns_hidden_by_a_band_counted_from_the_spacing_row_by_row(kit):
     counts the four columns from one facing column to the other."""
     design = kit[0]
     m = design["membrane"]
-    pos, fixed, beyond = [], {}, {}
-    for r in range(5, 26):
-        for c in range(10, 20):
-            fixed[(r, c)] = len(pos)
-            pos.append((10.0 * c, 8.0 * r))
-        for c in range(23, 27):
-            if c == 23 and r > 15:
-                continue  # the facing column's lower rows are hidden
-            beyond[(r - 3, c - 20)] = len(pos)
-            pos.append((221.0 + 5.0 * (c - 23) + 0.3 * (8.0 * r - 120.0), 8.0 * r))
+    fixed, beyond, pos = _patches_across_a_band(
+        lambda r: r <= 15, lambda c, r: 221.0 + 5.0 * (c - 23) + 0.3 * (8.0 * r - 120.0)
+    )
     phase = ((m["large_first"] - 3) % m["large_step"], (m["large_first"] - 20) % m["large_step"])
-    got = _bridge(beyond, phase, fixed, (0, 0), np.asarray(pos), np.array([0.0, 1.0]), design)
-    assert got == (20, 3)
+    assert _bridge(beyond, phase, fixed, (0, 0), pos, np.array([0.0, 1.0]), design) == (20, 3)
 
 
 def test_a_sparse_column_beside_a_band_is_passed_over(kit):
@@ -362,19 +371,9 @@ def test_a_sparse_column_beside_a_band_is_passed_over(kit):
     rows are matched from the next column in, and the hidden columns counted from there."""
     design = kit[0]
     m = design["membrane"]
-    pos, fixed, beyond = [], {}, {}
-    for r in range(5, 26):
-        for c in range(10, 20):
-            fixed[(r, c)] = len(pos)
-            pos.append((10.0 * c, 8.0 * r))
-        for c in range(23, 27):
-            if c == 23 and r not in (8, 14, 20):
-                continue
-            beyond[(r - 3, c - 20)] = len(pos)
-            pos.append((10.0 * c, 8.0 * r))
+    fixed, beyond, pos = _patches_across_a_band(lambda r: r in (8, 14, 20), lambda c, r: 10.0 * c)
     phase = ((m["large_first"] - 3) % m["large_step"], (m["large_first"] - 20) % m["large_step"])
-    got = _bridge(beyond, phase, fixed, (0, 0), np.asarray(pos), np.array([0.0, 1.0]), design)
-    assert got == (20, 3)
+    assert _bridge(beyond, phase, fixed, (0, 0), pos, np.array([0.0, 1.0]), design) == (20, 3)
 
 
 def test_larger_dots_found_where_dot_size_falls_across_the_region():
