@@ -39,3 +39,14 @@ rule all:
     default_target: True
     input:
         get_final_outputs(),
+
+
+onerror:
+    # Snakemake itself says only "Error in rule ... (check log file(s))": print the reason at the
+    # end of each failed job's log (the exception message), read from Snakemake's own log.
+    import sys
+    from triaxtrack.errors import format_failed_jobs
+
+    message = format_failed_jobs(log)
+    if message:
+        print(message, file=sys.stderr)

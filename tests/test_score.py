@@ -135,3 +135,42 @@ def test_per_camera_sigma_rows_and_summary(small_test, tmp_path, capsys):
     assert main(["score", str(tmp_path), str(small_test)]) == 0
     out = capsys.readouterr().out
     assert out.index("within tolerance") < out.index("per camera:") and "cam03" in out.split("per camera:")[1]
+
+
+def test_nothing_to_score_exits_non_zero(tmp_path, capsys):
+    """A results folder without any file the score reads is an error (exit 2), not a pass."""
+    truth = tmp_path / "truth"
+    truth.mkdir()
+    camera = {"width": 64, "height": 48, "K": [[50.0, 0, 31.5], [0, 50.0, 23.5], [0, 0, 1]],
+              "dist": [0.0] * 5, "R": [[1, 0, 0], [0, 1, 0], [0, 0, 1]], "t": [0, 0, 300.0]}  # fmt: skip
+    (truth / "cameras.json").write_text(json.dumps({"cameras": {"cam01": camera}}))
+    results = tmp_path / "results"
+    results.mkdir()
+    (results / "notes.txt").write_text("the run stopped early")
+    assert score(results, truth).empty
+    assert main(["score", str(results), str(truth)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"triaxtrack score: {results}: nothing to score: the results folder holds none of")
+    (results / "cameras.json").write_text(json.dumps({"cameras": {"cam01": camera}}))
+    assert main(["score", str(results), str(truth)]) == 0  # the same camera: every row passes
+
+
+def test_every_metric_is_documented_in_the_help_and_the_config_readme():
+    """Each metric `triaxtrack score` can print is explained by `triaxtrack score --help` and in
+    config/README.md (a new metric without words fails here)."""
+    import re
+    from pathlib import Path
+
+    import triaxtrack.camera_report as camera_report
+    import triaxtrack.score as score_module
+    from triaxtrack.cli import SCORE_HELP
+
+    source = Path(score_module.__file__).read_text() + Path(camera_report.__file__).read_text()
+    names = set(re.findall(r'_metric\(\s*"(\w+)"', source)) | set(
+        re.findall(r'\(\s*"(\w+_rms_error)"', source)
+    )
+    names |= set(re.findall(r'\("(centroid_sigma_\w+|tracked_share)"', source))
+    assert {"observations_without_truth", "id_swaps", "tracked_share", "pedestal_rms_error"} <= names
+    readme = (Path(__file__).resolve().parents[1] / "config" / "README.md").read_text()
+    assert [n for n in sorted(names) if n not in SCORE_HELP] == []
+    assert [n for n in sorted(names) if f"`{n}`" not in readme] == []

@@ -11,6 +11,46 @@ from pathlib import Path
 
 DEFAULT_DESIGN = Path(__file__).resolve().parents[2] / "config" / "kit.yaml"
 
+SCORE_HELP = """\
+Score whatever RESULTS_DIR holds against TRUTH_DIR (a simulated test folder or its truth/).
+One row per metric and item (a camera, camera@frame, all@frame, worst@frame, failed frames);
+a row without a tolerance is reported only. Tolerances: the config's `score` section.
+
+calibration/<camera>.json, cameras.json
+  focal_rel_error, principal_point_error (px), undistortion_map_error (px; reported:
+  ray_direction_error), camera_center_error (mm), camera_rotation_error (deg);
+  camera_missing / camera_unknown: a true camera absent from the results / a result camera
+  the truth lacks (fail); image_size_mismatch: calibrated at another image size (fails)
+labels.parquet (per camera@frame)
+  wrong_ids: labels farther than wrong_id_px from their target's exact projection;
+  coverage: share of the targets the truth says the camera sees that are labelled;
+  cell_centroid_median, cell_centroid_p95: centroid errors of the cell-wall dots (px)
+quality.json
+  mean_reprojection (px), all cameras and each
+points.parquet (per frame)
+  membrane_rms_error (mm; reported: membrane_max_error, pedestal_rms_error, cell_wall_rms_error),
+  membrane_3_rays: share of the membrane dots from 3+ rays; membrane_kept: share of the membrane
+  dots seen at the first frame still reconstructed at the last
+observations.parquet (with tracking.parquet)
+  id_swaps: observations farther than wrong_id_px from their own target's true projection;
+  observation_max_error, observation_median_error (px, reported);
+  observations_without_truth (reported): observations (camera, frame, id) the truth has no
+  projection for, so they cannot be checked for swaps: the simulator does not count the target
+  as seen there (partly outside the image, facing away, or partly hidden by a cell-wall band,
+  an occluder or the timestamp), or the camera did not record that frame
+tracking.parquet (per camera, reported)
+  centroid_sigma_median, centroid_sigma_p95 (px), tracked_share
+volume.parquet (per frame)
+  volume_error, volume_change_error, axial_strain_error; frames_measured: share of frames with
+  a volume (must be 1); reported: volume_error_sigmas, measured_fraction_min
+Per-frame metrics show the first and last frame, the worst (worst@<frame>) and the number of
+frames that failed (item `failed frames`, must be 0). Then "N of M within tolerance" and one line
+per camera: coverage min/median, sigma_px median/p95, tracked %.
+
+Exit status: 0 every row within tolerance; 1 a tolerance missed; 2 unusable input, or nothing
+to score (the results folder holds none of the files above).
+"""
+
 
 def _kit(args: argparse.Namespace) -> int:
     from triaxtrack.kit import export_kit, load_design
@@ -69,6 +109,9 @@ def _score(args: argparse.Namespace) -> int:
     except ValueError as err:
         print(f"triaxtrack score: {err}", file=sys.stderr)
         return 2
+    if df.empty:
+        print(f"triaxtrack score: {args.results_dir}: {format_table(df)}", file=sys.stderr)
+        return 2
     print(format_table(df))
     summary = format_camera_summary(camera_summary(df))
     if summary:
@@ -118,7 +161,8 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--json", default=None)
     c.set_defaults(func=_check_sim)
 
-    sc = sub.add_parser("score", help="compare a results folder with a truth folder")
+    sc = sub.add_parser("score", help="compare a results folder with a truth folder", description=SCORE_HELP,
+                        formatter_class=argparse.RawDescriptionHelpFormatter)  # fmt: skip
     sc.add_argument("results_dir")
     sc.add_argument("truth_dir")
     sc.add_argument("--config", default=None, help="config YAML with a `score` section of tolerances")

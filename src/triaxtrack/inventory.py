@@ -7,13 +7,19 @@ from collections import Counter
 FPS_REL_TOL = 1e-3  # container frame rates are rationals; 1e-3 absorbs 30000/1001 vs 29.97
 
 
-def summarize_probes(test: dict, probes: list[dict], name: str) -> dict:
+def summarize_probes(test: dict, probes: list[dict], name: str, *, strict: bool = True) -> dict:
     """Summarise per-camera video probes (:func:`triaxtrack.video.probe_video`) of a test.
 
     ``test`` is the validated ``test.yaml`` with ``cameras`` as a list of mappings (``name``,
     optional ``start_offset_s`` and ``dropped_frames``), in the order of ``probes``. The expected
-    frame count is test.yaml's ``frames`` if given, else the most common count (ties: the larger).
-    Cameras whose frame count, frame rate or size differ are flagged.
+    frame count is test.yaml's ``frames`` if given, else the most common count (ties: the larger);
+    the expected frame size is the most common one (ties: the larger).
+
+    Cameras whose frame count, frame rate or size differ are flagged (``flags``). A frame count
+    may differ for a reason (a late start, dropped frames: see the frame maps); a frame rate
+    other than test.yaml's ``fps``, or a frame size other than the other cameras', is a fault:
+    each gets a message naming the video file (``problems``, per camera and in one list), and
+    with ``strict`` (the default) a ValueError listing them all.
     """
     counts = Counter(p["frames"] for p in probes)
     if "frames" in test:
@@ -25,20 +31,35 @@ def summarize_probes(test: dict, probes: list[dict], name: str) -> dict:
     expected_size = max(sizes, key=lambda s: (sizes[s], s))
     cameras = []
     for camera, probe in zip(test["cameras"], probes, strict=True):
-        flags = []
+        flags, problems = [], []
+        video = probe.get("path", f"the video of camera {camera['name']}")
         if probe["frames"] != expected_frames:
             flags.append("frame_count_differs")
         if abs(probe["fps"] - test["fps"]) > FPS_REL_TOL * test["fps"]:
             flags.append("fps_differs")
+            problems.append(
+                f"{video}: frame rate {probe['fps']:.6g} frames/s, but test.yaml gives fps: {test['fps']:g}"
+            )
         if (probe["width"], probe["height"]) != expected_size:
             flags.append("size_differs")
+            problems.append(
+                f"{video}: frame size {probe['width']}x{probe['height']} pixels, but "
+                f"{sizes[expected_size]} of the {len(probes)} cameras' videos are "
+                f"{expected_size[0]}x{expected_size[1]}"
+            )
         cameras.append({
             "camera": camera["name"],
             **probe,
             "start_offset_s": camera.get("start_offset_s", 0.0),
             "dropped_frames": len(camera.get("dropped_frames", [])),
             "flags": flags,
+            "problems": problems,
         })  # fmt: skip
+    problems = [p for c in cameras for p in c["problems"]]
+    if strict and problems:
+        raise ValueError(
+            f"test {name!r}: {len(problems)} video(s) do not match the test:\n  " + "\n  ".join(problems)
+        )
     return {
         "test": name,
         "fps": test["fps"],
@@ -49,4 +70,5 @@ def summarize_probes(test: dict, probes: list[dict], name: str) -> dict:
         "cameras": cameras,
         "frame_count_differs": [c["camera"] for c in cameras if "frame_count_differs" in c["flags"]],
         "flagged": [c["camera"] for c in cameras if c["flags"]],
+        "problems": problems,
     }

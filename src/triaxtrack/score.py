@@ -547,7 +547,7 @@ def format_table(df: pd.DataFrame) -> str:
     if df.empty:
         return (
             "nothing to score: the results folder holds none of calibration/*.json, cameras.json, "
-            "labels.parquet, quality.json, points.parquet"
+            "labels.parquet, quality.json, points.parquet, tracking.parquet, volume.parquet"
         )
     lines = [f"{'metric':<26} {'item':<10} {'value':>12} {'tolerance':>10} {'unit':<4} result source"]
     for r in df.itertuples(index=False):

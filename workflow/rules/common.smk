@@ -10,13 +10,14 @@ import re
 from functools import cache
 from pathlib import Path
 
-import jsonschema
 import yaml
 from snakemake.exceptions import WorkflowError
+from snakemake.logging import logger
 from snakemake.utils import validate
 
-validate(config, "../schemas/config.schema.yaml")
+from triaxtrack.errors import schema_problems, source_of, unknown_top_level_keys
 
+CONFIG_SCHEMA_PATH = workflow.source_path("../schemas/config.schema.yaml")
 TEST_SCHEMA_PATH = workflow.source_path("../schemas/test.schema.yaml")
 KIT_DIR = "results/kit"
 # simulated cameras are cam01..camNN (the schema caps NN at 32)
@@ -31,23 +32,62 @@ wildcard_constraints:
     chunk=r"\d{4}",
 
 
+# ---------------------------------------------------------------- validation
+
+
+def _load_schema(path):
+    with open(path) as f:
+        return yaml.safe_load(f)
+
+
+def _config_sources():
+    """(file name, its document) of every source of `config`, lowest precedence first: the
+    workflow's configfile, each --configfile, then --config (named "--config")."""
+    settings = getattr(workflow, "config_settings", None)
+    cli = [Path(p).absolute() for p in getattr(settings, "configfiles", [])]
+    own = [Path(p) for p in workflow.configfiles if Path(p).absolute() not in cli]
+    sources = []
+    for path in own + cli:
+        relative = os.path.relpath(path)
+        name = path if relative.startswith("..") else relative
+        try:
+            sources.append((str(name), _load_schema(path) or {}))
+        except (OSError, yaml.YAMLError):
+            sources.append((str(name), {}))
+    if getattr(settings, "config", None):
+        sources.append(("--config", dict(settings.config)))
+    return sources or [("config", config)]
+
+
+def _validate_config():
+    """validate(config) (which also writes the schema's defaults into it), but a problem is
+    reported in words: the file, the key, "did you mean" for a near miss; never the schema.
+    """
+    try:
+        validate(config, "../schemas/config.schema.yaml")
+    except WorkflowError:
+        problems = schema_problems(
+            config, _load_schema(CONFIG_SCHEMA_PATH), _config_sources()
+        )
+        if not problems:
+            raise
+        raise WorkflowError(
+            "the configuration is not valid (every key is described in config/README.md):\n  "
+            + "\n  ".join(problems)
+        ) from None
+
+
+_validate_config()
+
+
 # ---------------------------------------------------------------- recorded test folders
-
-
-def _test_validator():
-    with open(TEST_SCHEMA_PATH) as f:
-        schema = yaml.safe_load(f)
-    return jsonschema.Draft202012Validator(schema)
-
-
-def _error_order(error):
-    return error.json_path
 
 
 def load_test_yaml(folder):
     """Read and validate FOLDER/test.yaml; return it with `cameras` as a list of mappings
     (`{"name": ...}` plus the optional per-camera keys) and `kit` defaulted to "kit".
-    Raises WorkflowError naming the file on any problem."""
+    Raises WorkflowError naming the file, the key and a near miss on any problem; warns about
+    top-level keys the workflow does not read (allowed: a recorder may write more)."""
     path = Path(folder) / "test.yaml"
     if not path.is_file():
         raise WorkflowError(f"recorded test folder {folder!s}: {path} not found")
@@ -56,12 +96,18 @@ def load_test_yaml(folder):
             doc = yaml.safe_load(f)
     except yaml.YAMLError as exc:
         raise WorkflowError(f"{path}: not valid YAML: {exc}") from exc
-    errors = sorted(_test_validator().iter_errors(doc), key=_error_order)
-    if errors:
-        lines = [f"  at {e.json_path}: {e.message}" for e in errors]
+    schema = _load_schema(TEST_SCHEMA_PATH)
+    unknown = unknown_top_level_keys(doc, schema)
+    if unknown:
+        logger.warning(
+            f"{path}: unknown top-level key(s) {', '.join(unknown)}: not read by the "
+            f"workflow, which reads {', '.join(sorted(schema['properties']))}"
+        )
+    problems = schema_problems(doc, schema, [(str(path), doc)])
+    if problems:
         raise WorkflowError(
-            f"{path} does not match workflow/schemas/test.schema.yaml:\n"
-            + "\n".join(lines)
+            "a recorded test's test.yaml is not valid (see config/README.md, `tests`):\n  "
+            + "\n  ".join(problems)
         )
     cameras = [c if isinstance(c, dict) else {"name": c} for c in doc["cameras"]]
     names = [c["name"] for c in cameras]
@@ -93,7 +139,10 @@ def _collect_tests():
             name = entry.get("name", recorded["name"])
             spec = {"path": folder, "recorded": recorded}
         if name in tests:
-            raise WorkflowError(f"config: test name {name!r} is used more than once")
+            where = source_of(["tests"], _config_sources())
+            raise WorkflowError(
+                f"{where}: `tests`: test name {name!r} is used more than once"
+            )
         tests[name] = spec
     return tests
 
@@ -168,7 +217,10 @@ def get_frames(test):
         return spec["recorded"]["frames"]
     from triaxtrack.video import probe_video
 
-    return int(probe_video(_recorded_video(test, get_cameras(test)[0]))["frames"])
+    # the index only: demuxing a whole video on every parse would slow every dry run (the
+    # probe_video and frame_map jobs check each video against its index)
+    video = _recorded_video(test, get_cameras(test)[0])
+    return int(probe_video(video, index_only=True)["frames"])
 
 
 def get_chunks(test):
