@@ -29,9 +29,10 @@ from triaxtrack.identify.state import LABEL_COLUMNS, NOT_REACHED, UNLABELLED, Id
 # same angle) has merged with the edge's fringe: on the demo one at 0.52 was 1.4 px off; 0.45 %
 # of all labelled membrane dots on four tests fall below it, beside an edge or not
 MERGED_ROUNDNESS_RATIO = 0.55
-# an end-row membrane dot beside a pedestal's edge and a gap in its row this much larger than its
-# grid neighbours has merged with the edge: of 869 on four tests, 99 % were under 1.33 and at
-# most 0.39 px off; the largest (1.8) was 0.93 px off
+# a membrane dot beside a dark edge this much larger than its grid neighbours has merged with the
+# edge: of 869 end-row dots beside a gap in their row on four tests, 99 % were under 1.33 and at
+# most 0.39 px off; the largest (1.8) was 0.93 px off; on soft footage (720p, 1 px blur) an end-row
+# dot at 2x its neighbours' area was 1.28 px off without a gap beside it
 MERGED_AREA_RATIO = 1.5
 FAR_PX = 1e9
 # a membrane dot whose image comes within this of a longitudinal band's (beyond its moment
@@ -143,8 +144,8 @@ def identify(
          "seen too obliquely for an accurate centroid"),
         (row_end & ~row_gap & edge,
          "last of its membrane row, beside a dark edge"),
-        (row_gap & edge & (_over_neighbours(f.ids, blobs.area_px.to_numpy(), m) > MERGED_AREA_RATIO),
-         "larger than its neighbours beside a dark edge and a gap in its row (merged with the edge)"),
+        (edge & (_over_neighbours(f.ids, blobs.area_px.to_numpy(), m) > MERGED_AREA_RATIO),
+         "larger than its neighbours beside a dark edge (merged with the edge)"),
         ((_over_neighbours(f.ids, blobs.roundness.to_numpy(), m) < MERGED_ROUNDNESS_RATIO) & edge,
          "less round than its neighbours, beside a dark edge (merged with the edge's fringe)"),
     ):  # fmt: skip
