@@ -5,13 +5,9 @@ console (the Snakefile's `onerror`)."""
 from __future__ import annotations
 
 import copy
-import os
-import shutil
-import subprocess
-import sys
-from pathlib import Path
 
 import yaml
+from test_workflow import REPO, run_snakemake, workflow_copy
 
 from triaxtrack.errors import (
     did_you_mean,
@@ -22,7 +18,6 @@ from triaxtrack.errors import (
     unknown_top_level_keys,
 )
 
-REPO = Path(__file__).resolve().parents[1]
 CONFIG_SCHEMA = yaml.safe_load((REPO / "workflow" / "schemas" / "config.schema.yaml").read_text())
 TEST_SCHEMA = yaml.safe_load((REPO / "workflow" / "schemas" / "test.schema.yaml").read_text())
 DEFAULTS = yaml.safe_load((REPO / "config" / "config.yaml").read_text())
@@ -164,32 +159,15 @@ def test_failed_jobs_are_read_from_snakemakes_log_and_printed_with_their_reason(
 # ---------------------------------------------------------------- through Snakemake
 
 
-def snakemake(*args: str, workdir: Path) -> subprocess.CompletedProcess:
-    path = os.pathsep.join(p for p in (str(REPO / "src"), os.environ.get("PYTHONPATH")) if p)
-    return subprocess.run(
-        [sys.executable, "-m", "snakemake", "--directory", str(workdir), "--nolock", *args],
-        cwd=workdir, env={**os.environ, "PYTHONPATH": path}, capture_output=True, text=True,
-    )  # fmt: skip
-
-
-def workflow_copy(tmp_path: Path) -> Path:
-    work = tmp_path / "work"
-    work.mkdir()
-    shutil.copy(REPO / "Snakefile", work)
-    shutil.copytree(REPO / "workflow", work / "workflow")
-    shutil.copytree(REPO / "config", work / "config")
-    return work
-
-
 def test_snakemake_names_the_config_file_and_the_key_without_the_schema(tmp_path):
     mine = tmp_path / "mine.yaml"
     mine.write_text("chunksize: 25\n")
-    proc = snakemake("-n", "--configfile", str(mine), workdir=REPO)
+    proc = run_snakemake("-n", "--nolock", "--configfile", str(mine), timeout=None)
     output = proc.stdout + proc.stderr
     assert proc.returncode != 0
     assert f"{mine}: `chunksize`: unknown key 'chunksize'; did you mean 'chunk_size'?" in output
     assert not any(word in output for word in SCHEMA_WORDS) and len(output.splitlines()) < 30, output
-    proc = snakemake("-n", "--config", "chunk_size=1", workdir=REPO)
+    proc = run_snakemake("-n", "--nolock", "--config", "chunk_size=1", timeout=None)
     assert "--config: `chunk_size`: 1 is less than the minimum of 2" in proc.stdout + proc.stderr
 
 
@@ -203,8 +181,8 @@ def test_a_failed_job_prints_its_reason_and_unknown_test_yaml_keys_are_warned_ab
     (folder / "test.yaml").write_text(yaml.safe_dump({"name": "lab", "fps": 15, "frames": 6, "frame": 6,
                                                       "cameras": ["cam01"]}))  # fmt: skip
     work = workflow_copy(tmp_path)
-    proc = snakemake("--cores", "1", "--config", f"test={folder}", "--", "results/lab/inventory/cam01.json",
-                     workdir=work)  # fmt: skip
+    proc = run_snakemake("--cores", "1", "--config", f"test={folder}", "--",
+                         "results/lab/inventory/cam01.json", workdir=work, timeout=None)  # fmt: skip
     output = proc.stdout + proc.stderr
     assert proc.returncode != 0
     assert f"{folder / 'test.yaml'}: unknown top-level key(s) 'frame' (did you mean 'frames'?)" in output

@@ -13,7 +13,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.collections import PolyCollection, QuadMesh
 from matplotlib.figure import Figure
 
-from triaxtrack.camera_report import camera_quality, camera_quality_figure, camera_quality_plot
+from triaxtrack.camera_report import camera_quality, camera_quality_figure
 from triaxtrack.report import (
     DIVERGING,
     REASON_COLOURS,
@@ -22,17 +22,12 @@ from triaxtrack.report import (
     figure_image,
     membrane_layout,
     reprojection_figure,
-    reprojection_plot,
     save_figure,
     specimen_frames,
-    strain_map,
     strain_map_figure,
-    strain_maps,
     strain_maps_figure,
     tracking_figure,
-    tracking_plot,
     volume_strain_figure,
-    volume_strain_plot,
     write_movie,
     write_movie_page,
 )
@@ -273,7 +268,7 @@ def test_volume_strain_figure(volume):
     assert [t.get_text() for t in strain.get_legend().get_texts()] == ["axial", "radial", "volumetric"]
     axial = strain.get_lines()[1]  # after the zero line
     np.testing.assert_allclose(axial.get_ydata(), 100 * volume["axial_strain"].to_numpy())
-    img = volume_strain_plot(volume)
+    img = figure_image(volume_strain_figure(volume))
     assert img.shape == (680, 900, 3)
     _drawn(img)
 
@@ -329,7 +324,7 @@ def test_strain_map(strains, layout):
     img = figure_image(fig)
     _drawn(img)
     assert _near(img, "#3b4cc0", 40) > 100  # the blue end of the diverging scale is drawn
-    assert strain_map(strains, layout, 0, "e_tt", colorbar=False).shape[1] < img.shape[1]
+    assert figure_image(strain_map_figure(strains, layout, 0, "e_tt", colorbar=False)).shape[1] < img.shape[1]
     with pytest.raises(ValueError, match="frame 99"):
         strain_map_figure(strains, layout, 99)
     with pytest.raises(ValueError, match="e_xx"):
@@ -358,7 +353,7 @@ def test_strain_maps(strains, layout):
     # one colour range per component, shared by its row
     limits = [_mesh(ax).get_clim() for ax in maps]
     assert len(set(limits[: len(frames)])) == 1 and len(set(limits[len(frames) :])) == 1
-    img = strain_maps(strains, layout, frames)
+    img = figure_image(strain_maps_figure(strains, layout, frames))
     assert img.shape[1] > img.shape[0]
     _drawn(img)
     empty = strain_maps_figure(strains, layout, [123])  # no such frame: a "no strain data" figure
@@ -375,7 +370,7 @@ def test_reprojection_figure(quality):
     assert len(bars.patches) == 13
     texts = _texts(fig)
     assert "cam13\n3013/13" in texts and "0.180" in texts and "mean, all cameras" in texts
-    assert reprojection_plot(quality).shape == (660, 900, 3)
+    assert figure_image(reprojection_figure(quality)).shape == (660, 900, 3)
 
 
 def test_reprojection_figure_sparse():
@@ -407,7 +402,7 @@ def test_tracking_figure(tracks, layout):
     assert labels[0].startswith("membrane dots") and labels[1].startswith("other targets")
     assert [t.get_text() for t in losses.get_legend().get_texts()] == ["lost", "edge", "merged", "jump",
                                                                        "not_recorded"]  # fmt: skip
-    img = tracking_plot(tracks, layout)
+    img = figure_image(tracking_figure(tracks, layout))
     assert img.shape == (300 + 300 + 340, 900, 3)
     _drawn(img)
     for colour in (REPORTED, REASON_COLOURS["lost"], REASON_COLOURS["not_recorded"]):
@@ -443,7 +438,7 @@ def test_camera_quality_and_figure(tracks):
     top, bottom = fig.axes[:2]
     assert top.get_ylabel() == "tracked (%)" and bottom.get_ylabel() == "sigma_px (px)"
     assert "cam01\n2" in _texts(fig)  # under cam01: the median targets labelled, 1.5 rounded
-    img = camera_quality_plot(q.reset_index())
+    img = figure_image(camera_quality_figure(q.reset_index()))
     assert img.shape == (680, 900, 3)
     _drawn(img)
     assert _near(img, REPORTED, 2) > 1000  # the tracked share's bars

@@ -7,7 +7,7 @@
   ``centroid_sigma_p95``, ``tracked_share``; item = camera).
 * :func:`camera_summary`, :func:`format_camera_summary`: one line per camera of a score table:
   coverage (min / median over its labelled frames, needs the truth), sigma_px, tracked share.
-* :func:`camera_quality_figure` (:func:`camera_quality_plot` as an image): the report's figure of
+* :func:`camera_quality_figure`: the report's figure of
   :func:`camera_quality` (matplotlib).
 """
 
@@ -168,10 +168,3 @@ def camera_quality_figure(quality: pd.DataFrame, width_px: int = 900) -> Figure:
         for ax in (top, bottom):
             ax.set_xlabel("camera")
     return fig
-
-
-def camera_quality_plot(quality: pd.DataFrame, width_px: int = 900) -> np.ndarray:
-    """:func:`camera_quality_figure` drawn as a (H, W, 3) uint8 BGR image."""
-    from triaxtrack.report.style import figure_image
-
-    return figure_image(camera_quality_figure(quality, width_px))

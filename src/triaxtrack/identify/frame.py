@@ -135,9 +135,9 @@ def identify(
     cell_round = np.where(edge, p.min_cell_roundness, p.min_clear_cell_roundness)
     cell_round = np.where(recentred, p.min_recentred_roundness, cell_round)
     row_end, row_gap = _membrane_row_ends(f.ids, m)
-    at_border = blobs.at_border.to_numpy(bool) if "at_border" in blobs else np.zeros(n, bool)
+    at_border = blobs.at_border.to_numpy(bool, copy=True) if "at_border" in blobs else np.zeros(n, bool)
     for bad, why in (
-        (at_border.copy(), "cut by the image border"),
+        (at_border, "cut by the image border"),
         (blobs.area_px.to_numpy() < np.where(membrane, p.min_membrane_area_px, cell_area),
          "too small for an accurate centroid"),
         (blobs.roundness.to_numpy() < np.where(membrane, p.min_membrane_roundness, cell_round),

@@ -1,9 +1,9 @@
 """Figures and a movie for the workflow's HTML report.
 
 Charts are drawn by matplotlib (Agg, never pyplot or a display): every ``*_figure`` function
-takes tables (or ``quality.json`` as a dict) and returns a new :class:`matplotlib.figure.Figure`,
-and its ``*_plot`` (or :func:`strain_map`, :func:`strain_maps`) twin returns the same figure
-drawn as a (H, W, 3) uint8 BGR image; :func:`save_figure` writes a figure as PNG. Nothing here
+takes tables (or ``quality.json`` as a dict) and returns a new :class:`matplotlib.figure.Figure`;
+:func:`figure_image` draws one as a (H, W, 3) uint8 BGR image and :func:`save_figure` writes it
+as PNG. Nothing here
 reads or writes files except :func:`save_figure`, :func:`write_movie` and
 :func:`write_movie_page`, which write the one file they are given.
 
@@ -33,14 +33,11 @@ from triaxtrack.report.figures import (
     REPORTED,
     draw_bars,
     reprojection_figure,
-    reprojection_plot,
     tracking_figure,
-    tracking_plot,
     volume_strain_figure,
-    volume_strain_plot,
 )
 from triaxtrack.report.layout import MembraneLayout, membrane_layout
-from triaxtrack.report.maps import strain_map, strain_map_figure, strain_maps, strain_maps_figure
+from triaxtrack.report.maps import strain_map_figure, strain_maps_figure
 from triaxtrack.report.movie import DIVERGING, specimen_frames, write_movie, write_movie_page
 from triaxtrack.report.style import DIVERGING_CMAP, PALETTE, figure_image, save_figure
 
@@ -57,17 +54,12 @@ __all__ = [
     "figure_image",
     "membrane_layout",
     "reprojection_figure",
-    "reprojection_plot",
     "save_figure",
     "specimen_frames",
-    "strain_map",
     "strain_map_figure",
-    "strain_maps",
     "strain_maps_figure",
     "tracking_figure",
-    "tracking_plot",
     "volume_strain_figure",
-    "volume_strain_plot",
     "write_movie",
     "write_movie_page",
 ]

@@ -2,8 +2,7 @@
 tracking losses.
 
 Each ``*_figure`` function takes tables (or ``quality.json`` as a dict) and returns a new
-:class:`matplotlib.figure.Figure` (Agg, never pyplot); each ``*_plot`` function draws the same
-figure into a (H, W, 3) uint8 BGR image. :func:`draw_bars` is the bar panel they share (and
+:class:`matplotlib.figure.Figure` (Agg, never pyplot). :func:`draw_bars` is the bar panel they share (and
 :func:`triaxtrack.camera_report.camera_quality_figure` uses).
 
 Conventions: strains of ``volume`` are compression positive, as in :mod:`triaxtrack.tables`,
@@ -21,7 +20,7 @@ from matplotlib.figure import Figure
 
 from triaxtrack.report.common import number
 from triaxtrack.report.layout import MembraneLayout
-from triaxtrack.report.style import PALETTE, figure_image, new_figure, no_data, styled
+from triaxtrack.report.style import PALETTE, new_figure, no_data, styled
 
 __all__ = [
     "LOSS_REASONS",
@@ -29,11 +28,8 @@ __all__ = [
     "REPORTED",
     "draw_bars",
     "reprojection_figure",
-    "reprojection_plot",
     "tracking_figure",
-    "tracking_plot",
     "volume_strain_figure",
-    "volume_strain_plot",
 ]
 
 #: Why a target is not reported in a frame (``tables.TRACKS``, ``triaxtrack.track``), in the
@@ -147,11 +143,6 @@ def volume_strain_figure(volume: pd.DataFrame, width_px: int = 900) -> Figure:
     return fig
 
 
-def volume_strain_plot(volume: pd.DataFrame, width_px: int = 900) -> np.ndarray:
-    """:func:`volume_strain_figure` as a BGR image."""
-    return figure_image(volume_strain_figure(volume, width_px))
-
-
 # --------------------------------------------------------------------------- bars
 
 
@@ -260,11 +251,6 @@ def reprojection_figure(quality: dict, width_px: int = 900) -> Figure:
     return fig
 
 
-def reprojection_plot(quality: dict, width_px: int = 900) -> np.ndarray:
-    """:func:`reprojection_figure` as a BGR image."""
-    return figure_image(reprojection_figure(quality, width_px))
-
-
 # --------------------------------------------------------------------------- tracking
 
 
@@ -335,8 +321,3 @@ def tracking_figure(tracks: pd.DataFrame, layout: MembraneLayout, width_px: int 
     )
     axes[2].set_xlabel("camera")
     return fig
-
-
-def tracking_plot(tracks: pd.DataFrame, layout: MembraneLayout, width_px: int = 900) -> np.ndarray:
-    """:func:`tracking_figure` as a BGR image."""
-    return figure_image(tracking_figure(tracks, layout, width_px))

@@ -22,9 +22,9 @@ from matplotlib.ticker import MaxNLocator
 
 from triaxtrack.report.common import MIN_RANGE, half_range
 from triaxtrack.report.layout import MembraneLayout
-from triaxtrack.report.style import DIVERGING_CMAP, MISSING, figure_image, new_figure, no_data, styled
+from triaxtrack.report.style import DIVERGING_CMAP, MISSING, new_figure, no_data, styled
 
-__all__ = ["strain_map", "strain_map_figure", "strain_maps", "strain_maps_figure"]
+__all__ = ["strain_map_figure", "strain_maps_figure"]
 
 MAP_PX = 250  # width of one unrolled membrane (360 deg), pixels
 MAP_MARGIN_PX = {"width": 62, "height": 100}  # axes labels, ticks and title around one map
@@ -125,18 +125,6 @@ def strain_map_figure(
     return fig
 
 
-def strain_map(
-    strains: pd.DataFrame,
-    layout: MembraneLayout,
-    frame: int,
-    component: str = "e_zz",
-    vmax: float | None = None,
-    colorbar: bool = True,
-) -> np.ndarray:
-    """:func:`strain_map_figure` as a BGR image."""
-    return figure_image(strain_map_figure(strains, layout, frame, component, vmax, colorbar))
-
-
 @styled
 def strain_maps_figure(
     strains: pd.DataFrame,
@@ -174,13 +162,3 @@ def strain_maps_figure(
         fig.colorbar(mesh, ax=list(axes[i]), label=f"{comp} (%)", extend="both", shrink=0.9)
     fig.suptitle(TITLE)
     return fig
-
-
-def strain_maps(
-    strains: pd.DataFrame,
-    layout: MembraneLayout,
-    frames: Sequence[int],
-    components: Sequence[str] = ("e_zz", "e_tt"),
-) -> np.ndarray:
-    """:func:`strain_maps_figure` as a BGR image."""
-    return figure_image(strain_maps_figure(strains, layout, frames, components))
