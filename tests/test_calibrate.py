@@ -220,7 +220,7 @@ def test_two_stage_fit_with_partial_views_in_their_own_frames():
 def test_two_stage_fit_starts_from_the_whole_boards(monkeypatch):
     """The first cv2.calibrateCameraExtended call sees the whole boards only, the second every
     view, from the first's intrinsics (CALIB_USE_INTRINSIC_GUESS)."""
-    import triaxtrack.calibrate as calibrate
+    import triaxtrack.calibrate.fit as calibrate
 
     calls = []
     real = cv2.calibrateCameraExtended

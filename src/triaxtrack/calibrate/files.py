@@ -1,0 +1,93 @@
+"""The calibration's files: the kit's board.json, a camera's board images, and the result JSON
+(read back, turned into a Camera, summarised for the job log)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from triaxtrack.calibrate.config import CalibrationError
+from triaxtrack.optics import Camera
+
+IMAGE_SUFFIXES = (".png",)  # board images of test-folder.md: calibration/<camera>/*.png
+
+
+def read_board(kit_dir: str | Path) -> dict:
+    """The checkerboard of a kit export (``KIT/board.json``); ValueError naming the file."""
+    path = Path(kit_dir) / "board.json"
+    try:
+        board = json.loads(path.read_text())
+        if board.get("type", "checkerboard") != "checkerboard":
+            raise ValueError(f"board type {board['type']!r} is not a checkerboard")
+        for key in ("squares_x", "squares_y", "square_mm"):
+            if key not in board:
+                raise ValueError(f"no {key!r}")
+        if min(int(board["squares_x"]), int(board["squares_y"])) < 3 or float(board["square_mm"]) <= 0:
+            raise ValueError("needs at least 3 x 3 squares of positive size")
+    except (OSError, ValueError, TypeError) as err:
+        raise ValueError(f"{path}: not a usable calibration board: {err}") from err
+    return board
+
+
+def list_board_images(camera: str, folder: str | Path) -> list[Path]:
+    """The board images of one camera (``folder/*.png``, sorted); CalibrationError if none."""
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise CalibrationError(f"camera {camera}: calibration folder {folder} not found")
+    paths = sorted(p for p in folder.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES and p.is_file())
+    if not paths:
+        raise CalibrationError(f"camera {camera}: no board images (*.png) in {folder}")
+    return paths
+
+
+def _read_gray(camera: str, path: str | Path) -> np.ndarray:
+    gray = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
+    if gray is None:
+        raise CalibrationError(f"camera {camera}: cannot read board image {path}")
+    return gray
+
+
+def read_calibration(path: str | Path) -> dict:
+    """A calibration result (module docstring); ValueError naming the file if it is not one."""
+    path = Path(path)
+    try:
+        cal = json.loads(path.read_text())
+        for key in ("camera", "width", "height", "K", "dist"):
+            if key not in cal:
+                raise ValueError(f"no {key!r}")
+        K = np.asarray(cal["K"], float)
+        dist = np.asarray(cal["dist"], float)
+        if K.shape != (3, 3) or dist.ndim != 1 or len(dist) < 4:
+            raise ValueError(f"K must be 3 x 3 and dist 4+ coefficients, not {K.shape} and {dist.shape}")
+    except (OSError, ValueError, TypeError) as err:
+        raise ValueError(f"{path}: not a calibration result: {err}") from err
+    return cal
+
+
+def calibrated_camera(cal: dict) -> Camera:
+    """The :class:`~triaxtrack.optics.Camera` of a calibration result: its intrinsics and
+    distortion, with the identity pose (the pose is found later, by :mod:`triaxtrack.sfm`)."""
+    return Camera.from_json(str(cal["camera"]), {**cal, "R": np.eye(3), "t": np.zeros(3)})
+
+
+def format_calibration(result: dict) -> str:
+    """A few lines summarising a calibration result (for the job log)."""
+    K = result["K"]
+    kinds = [im.get("board") for im in result["images"] if im["used"]]
+    lines = [
+        f"{result['camera']}: {result['model']} model, fx {K[0][0]:.2f} fy {K[1][1]:.2f} "
+        f"cx {K[0][2]:.2f} cy {K[1][2]:.2f} px, dist {[round(d, 5) for d in result['dist']]}",
+        f"rms {result['rms_px']:.4f} px over {result['n_images_used']} images "
+        f"({kinds.count('whole')} whole boards, {kinds.count('partial')} partial; "
+        f"{result.get('n_corners_used', '?')} corners; "
+        f"{result['n_images_found']} of {result['n_images']} with a board found; "
+        f"outlier limit {result['outlier_limit_px']:.3f} px; corner passes {result.get('passes', 1)})",
+    ]
+    for im in result["images"]:
+        if not im["used"]:
+            rms = "" if im["rms_px"] is None else f" (rms {im['rms_px']:.3f} px)"
+            lines.append(f"  not used: {im['image']}{rms}: {im['reason']}")
+    return "\n".join(lines)
