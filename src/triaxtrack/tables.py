@@ -48,7 +48,9 @@ compression positive) relative to the reference frame."""
 VOLUME_RESULT = Schema(
     "volume_result",
     VOLUME.columns | {
-        "height_mm": "float64", "radial_strain": "float64", "volume_change_mm3": "float64",
+        "height_mm": "float64", "radial_strain": "float64", "local_axial_strain": "float64",
+        "local_axial_sigma": "float64", "local_radial_strain": "float64", "local_radial_sigma": "float64",
+        "volume_change_mm3": "float64",
         "mesh_volume_mm3": "float64", "chordal_mm3": "float64", "membrane_mm3": "float64",
         "volume_sigma_mm3": "float64", "measured_fraction": "float64", "filled_dots": "Int64",
         "watertight": "boolean", "reference_frame": "Int64", "warning": "object", "reason": "object",
@@ -57,7 +59,11 @@ VOLUME_RESULT = Schema(
 )  # fmt: skip
 """The measured ``results/<test>/volume.parquet`` (``triaxtrack.volume.volume_series``): the
 :data:`VOLUME` columns, then ``height_mm`` (top face centre above the bottom face),
-``radial_strain = (volumetric - axial) / 2``, ``volume_change_mm3 = V - V0``, the volume's parts
+``radial_strain = (volumetric - axial) / 2``; ``local_axial_strain`` and ``local_radial_strain``
+over the middle third of the reference height from the measured membrane dots there, with their
+standard errors ``local_axial_sigma``, ``local_radial_sigma`` (``triaxtrack.volume.local``; no
+bedding errors at the ends: the gauge length of a local transducer);
+``volume_change_mm3 = V - V0``, the volume's parts
 ``mesh_volume_mm3, chordal_mm3, membrane_mm3``; ``volume_sigma_mm3`` the 1-sigma standard
 uncertainty of ``volume_mm3`` (mm^3: the measured dots' noise, the fill's leave-out error and the
 top face's height, in quadrature; NaN when the fill's part cannot be estimated);

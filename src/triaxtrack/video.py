@@ -595,3 +595,27 @@ def concat_videos(segments: Sequence[PathLike], out_path: PathLike) -> int:
         out.unlink(missing_ok=True)
         raise
     return n_packets
+
+
+def keyframe_indices(path: PathLike) -> np.ndarray:
+    """Frame indices (sorted, int64) of the keyframes (intra-coded frames) of ``path``'s first
+    video stream, from its packets (demuxed, not decoded). ValueError naming the file if it
+    cannot be read."""
+    p = Path(path)
+    keys = []
+    with _open_input(p) as container:
+        stream = container.streams.video[0]
+        fps = _stream_fps(stream, p)
+        tb = Fraction(stream.time_base)
+        t0 = int(stream.start_time or 0)
+        k = -1
+        try:
+            for packet in container.demux(stream):
+                if packet.size == 0:
+                    continue  # the demuxer's end-of-stream flush packet
+                k = k + 1 if packet.pts is None else _frame_index(packet.pts, t0, tb, fps)
+                if packet.is_keyframe:
+                    keys.append(k)
+        except av.FFmpegError as exc:
+            raise ValueError(f"cannot read video {p}: {exc}") from exc
+    return np.unique(np.asarray(keys, np.int64))

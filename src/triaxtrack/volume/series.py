@@ -18,6 +18,7 @@ from triaxtrack.volume.grid import (
     face_ends,
     membrane_grid,
 )
+from triaxtrack.volume.local import local_strains
 from triaxtrack.volume.mesh import (
     REFINE_LEVELS,
     check_mesh,
@@ -67,7 +68,9 @@ def volume_series(
     ``t0`` (mm; default the design's ``specimen.membrane_thickness``). Returns ``(volume,
     strains)``: ``volume`` has the :data:`~triaxtrack.tables.VOLUME_RESULT` columns
     (``axial_strain = (H0 - H) / H0``, ``volumetric_strain = (V0 - V) / V0``, compression
-    positive, ``radial_strain = (volumetric - axial) / 2``, ``volume_change_mm3 = V - V0``,
+    positive, ``radial_strain = (volumetric - axial) / 2``, the local axial and radial strains
+    over the middle third (:func:`~triaxtrack.volume.local.local_strains`, from the measured
+    dots only), ``volume_change_mm3 = V - V0``,
     ``volume_sigma_mm3`` the 1-sigma standard uncertainty of ``volume_mm3``
     (:mod:`triaxtrack.volume.uncertainty`), ``measured_fraction`` the share of membrane dots
     measured); ``strains`` has the :data:`~triaxtrack.tables.STRAINS` columns for every frame
@@ -81,9 +84,11 @@ def volume_series(
     if t0 is None:
         t0 = float(design["specimen"]["membrane_thickness"])
     frames = sorted(points["frame"].unique())
+    membrane_ids = table.loc[table["surface"] == "membrane", "id"].to_numpy()
     rows: list[dict] = []
     strain_parts: list[pd.DataFrame] = []
     ref: tuple[int, MembraneGrid, float, float] | None = None
+    ref_points = points.iloc[:0]
     for frame in frames:
         pf = points[points["frame"] == frame]
         time_s = float(pf["time_s"].iloc[0])
@@ -98,6 +103,7 @@ def volume_series(
             watertight = check_mesh(*closed_mesh(grid, cap))["watertight"] if check else pd.NA
             if ref is None:
                 ref = (int(frame), grid, res.height_mm, res.volume_mm3)
+                ref_points = pf
             strains = strain_field(grid, ref[1])
         except FAILURES as err:
             rows.append(row | {"reason": str(err)})
@@ -119,7 +125,7 @@ def volume_series(
             "chordal_mm3": res.chordal_mm3, "membrane_mm3": res.membrane_mm3,
             "volume_sigma_mm3": unc.sigma_mm3, "filled_dots": res.filled_dots, "watertight": watertight,
             "reference_frame": k0, "warning": "; ".join(warnings), "reason": "",
-        })  # fmt: skip
+        } | local_strains(pf, ref_points, h0, membrane_ids))  # fmt: skip
         strain_parts.append(strains.assign(frame=int(frame), time_s=time_s))
     vol = pd.DataFrame(rows).reindex(columns=list(VOLUME_RESULT.columns))
     vol[["warning", "reason"]] = vol[["warning", "reason"]].fillna("")

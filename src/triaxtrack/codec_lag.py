@@ -1,0 +1,246 @@
+"""How inter-coded video frames depart from keyframes, measured at keyframes and removed from the
+tracks.
+
+An H.264/H.265 encoder codes a predicted (P) frame as the previous decoded frame moved by
+quarter-pixel motion vectors plus a quantised residual. A dot that moves by a fraction of a
+pixel per frame is therefore shown a little behind where it is: the residual that would move
+it is partly quantised away, and the shortfall carries over from frame to frame. A keyframe
+(an intra-coded frame) is coded from the picture alone and shows the dot where it is. Seen in
+the tracks, every P frame's centroids lag the motion by a common fraction ``lag`` of a frame
+(the picture is effectively taken ``lag`` frames earlier), and the trajectory steps forward at
+every keyframe: 0.02-0.03 frames on the simulator's H.264 at crf 14 (0.005 px at 0.28 px per
+frame). P frames also render the dots a little differently from a keyframe, which moves their
+centroids by a smooth field across the image: on the simulator's H.264 the membrane dots of a
+P frame sit closer to the specimen's axis, a horizontal scale of -0.6e-4 to -1.2e-4 on top of
+the keyframe's own. Together they put a step of 0.01-0.03 % of the specimen's volume at each
+keyframe.
+
+The lag is measured per camera at each keyframe ``K`` from the camera's own tracks: on each
+side of ``K``, a quadratic in time is fitted to every dot's centroids in the nearest
+``SIDE_FRAMES`` P frames (all from the same GOP, so with one common lag), and evaluated at
+``K``; there it gives the dot's position ``lag`` frames late, ``x(K) - lag x'(K)``, while the
+keyframe shows ``x(K)``. The difference over all the membrane dots is fitted by least squares
+as the lag times each dot's velocity ``x'`` plus an affine field of the image coordinates per
+axis (seven coefficients, with their standard errors; a coefficient within
+``SIGNIFICANT_SIGMAS`` of zero is taken as zero). The velocity is a straight line's slope
+over the next ``FAR_FRAMES`` P frames beyond those (a velocity fitted to the same frames as
+the extrapolation shares its noise, and biases the ratio by as much as the lag itself at
+0.015 px of centroid noise); the quadratic absorbs the motion's own acceleration. A dot at rest
+carries no weight, so a static test gives no correction.
+
+Each P frame's membrane dots are then moved forward by ``lag x'`` (``x'`` the dot's velocity
+from its own centroids, pixels per frame) and by the field, the coefficients interpolated
+linearly in time between those measured just after the previous keyframe and just before the
+next (or held from the one side measured). What is left: a departure that grows within the
+last few frames of a GOP (x264's rate control spends fewer bits on frames no later frame
+refers to) is measured only as its mean over the ``SIDE_FRAMES`` before the keyframe.
+Keyframes, and the other targets (cell wall, pedestal CTs), are left as they are. A chunk with no
+keyframe measured (a GOP longer than the chunk) is left uncorrected, and its log says so.
+Frames are test frames; pixels in OpenCV's convention.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+SIDE_FRAMES = 5  # P frames extrapolated to the keyframe on each side (at least MIN_SIDE_FRAMES)
+MIN_SIDE_FRAMES = 4  # fewer on a side: that side of the keyframe is not measured
+FAR_FRAMES = 10  # the P frames beyond those that give the velocity (at least MIN_FAR_FRAMES)
+MIN_FAR_FRAMES = 4
+MIN_DOTS = 30  # dots needed (with every frame of the side reported) to measure a lag
+SIGNIFICANT_SIGMAS = 3.0  # a lag within this many standard errors of zero is not applied
+FIRST_MEMBRANE_ID = 1001  # the membrane dots (target-kit.md): the small dots the field is measured on
+FIELD_SCALE_PX = 1000.0  # the affine field's slopes are per this many pixels
+FIELD_COLUMNS = ("u0_px", "u_per_u", "u_per_v", "v0_px", "v_per_u", "v_per_v")
+LAG_COLUMNS = ("keyframe", "side", "lag_frames", "sigma_frames", *FIELD_COLUMNS, "dots", "speed_px")
+
+
+def _quadratic_weights(t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Weights giving, from values at times ``t``, the least-squares quadratic's value and
+    slope at time 0: ``(w_value (n,), w_slope (n,))``."""
+    A = np.c_[np.ones_like(t), t, t * t]
+    pinv = np.linalg.pinv(A)  # (3, n)
+    return pinv[0], pinv[1]
+
+
+def _side_frames(frames: np.ndarray, keys: np.ndarray, k: int, side: int) -> np.ndarray:
+    """The processed frames on one side (-1 before, +1 after) of the keyframe ``k``, nearest
+    first, stopping at the next keyframe that way (another GOP)."""
+    if side < 0:
+        fence = keys[keys < k].max(initial=-1)
+        near = frames[(frames < k) & (frames > fence)][::-1]
+    else:
+        fence = keys[keys > k].min(initial=np.iinfo(np.int64).max)
+        near = frames[(frames > k) & (frames < fence)]
+    return near
+
+
+def _positions(tracks: pd.DataFrame) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(frames (F,), ids (N,), uv (F, N, 2))`` of the reported centroids (NaN elsewhere)."""
+    rep = tracks[tracks["reason"] == ""]
+    frames = np.unique(tracks["frame"].to_numpy(np.int64))
+    ids = np.unique(tracks["id"].to_numpy(np.int64))
+    uv = np.full((len(frames), len(ids), 2), np.nan)
+    fi = np.searchsorted(frames, rep["frame"].to_numpy(np.int64))
+    ii = np.searchsorted(ids, rep["id"].to_numpy(np.int64))
+    uv[fi, ii] = rep[["u_px", "v_px"]].to_numpy(np.float64)
+    return frames, ids, uv
+
+
+def _side_fit(uv: np.ndarray, frames: np.ndarray, keys: np.ndarray, k: int, side: int) -> tuple | None:
+    """One side of keyframe ``k``: ``(d (n, 2), vel (n, 2), uv_k (n, 2))`` for the dots seen in
+    every frame used: the keyframe's centroid minus the P frames' quadratic extrapolated to it,
+    the velocity from the frames beyond, and the keyframe's centroid (None: too few)."""
+    side_frames = _side_frames(frames, keys, k, side)
+    near, far = side_frames[:SIDE_FRAMES], side_frames[SIDE_FRAMES : SIDE_FRAMES + FAR_FRAMES]
+    if len(near) < MIN_SIDE_FRAMES or len(far) < MIN_FAR_FRAMES:
+        return None
+    at_k = uv[np.searchsorted(frames, k)]
+    w_val = _quadratic_weights((near - k).astype(np.float64))[0]
+    tf = (far - far.mean()).astype(np.float64)
+    w_slope = tf / (tf * tf).sum()
+    p = uv[np.searchsorted(frames, near)]  # (n, N, 2)
+    q = uv[np.searchsorted(frames, far)]
+    ok = np.isfinite(p).all(axis=(0, 2)) & np.isfinite(q).all(axis=(0, 2)) & np.isfinite(at_k).all(axis=1)
+    if ok.sum() < MIN_DOTS:
+        return None
+    fit = np.einsum("n,nid->id", w_val, p[:, ok])
+    vel = np.einsum("n,nid->id", w_slope, q[:, ok])
+    return at_k[ok] - fit, vel, at_k[ok]
+
+
+def _design(vel: np.ndarray, uv: np.ndarray) -> np.ndarray:
+    """The (2n, 7) design of the P frames' departure (u rows, then v rows): the lag times the
+    velocity, and an affine field per axis in image coordinates (``FIELD_SCALE_PX`` units)."""
+    n = len(uv)
+    x = uv / FIELD_SCALE_PX
+    A = np.zeros((2 * n, 7))
+    A[:n, 0], A[n:, 0] = vel[:, 0], vel[:, 1]
+    A[:n, 1], A[:n, 2], A[:n, 3] = 1.0, x[:, 0], x[:, 1]
+    A[n:, 4], A[n:, 5], A[n:, 6] = 1.0, x[:, 0], x[:, 1]
+    return A
+
+
+def estimate_lag(tracks: pd.DataFrame, keyframes: np.ndarray) -> pd.DataFrame:
+    """How one camera's P frames depart from its keyframes, measured at each of its
+    ``keyframes`` (test frames) within ``tracks`` (``TRACKS`` rows of one camera; the membrane
+    dots, IDs from 1001, are used).
+
+    Returns one row per keyframe and side measured: ``keyframe``, ``side`` (-1: the P frames
+    before it, +1: after it), ``lag_frames`` (how many frames late those P frames show the
+    dots) and ``sigma_frames`` (its standard error), the affine field's coefficients
+    ``FIELD_COLUMNS`` (pixels, per ``FIELD_SCALE_PX`` pixels for the slopes: what the P frames
+    show minus what the keyframe shows, besides the lag, with the sign reversed) each zeroed
+    where within ``SIGNIFICANT_SIGMAS`` standard errors of zero, ``dots`` used and
+    ``speed_px`` (their RMS speed, pixels per frame).
+    """
+    frames, _, uv = _positions(tracks[tracks["id"] >= FIRST_MEMBRANE_ID])
+    keys = np.intersect1d(np.asarray(keyframes, np.int64), frames)
+    rows = []
+    for k in keys:
+        for side in (-1, 1):
+            got = _side_fit(uv, frames, keys, int(k), side)
+            if got is None:
+                continue
+            d, vel, at_k = got
+            A = _design(vel, at_k)
+            y = np.r_[d[:, 0], d[:, 1]]
+            sol, *_ = np.linalg.lstsq(A, y, rcond=None)
+            resid = y - A @ sol
+            s2 = float(resid @ resid) / max(len(y) - A.shape[1], 1)
+            se = np.sqrt(s2 * np.diag(np.linalg.pinv(A.T @ A)))
+            coef = np.where(np.abs(sol) > SIGNIFICANT_SIGMAS * se, sol, 0.0)
+            speed = float(np.sqrt((vel * vel).sum() / len(vel)))
+            rows.append((int(k), side, float(sol[0]), float(se[0]), *map(float, coef[1:]), len(vel), speed))
+    return pd.DataFrame(rows, columns=list(LAG_COLUMNS))
+
+
+def _coefficients(frames: np.ndarray, keyframes: np.ndarray, lags: pd.DataFrame) -> np.ndarray:
+    """(F, 7) lag and field coefficients of each of ``frames``: 0 at keyframes; in a P frame
+    interpolated linearly in time between those measured after the previous keyframe and
+    before the next one, or held from the one side measured; NaN where neither is. A lag within
+    ``SIGNIFICANT_SIGMAS`` standard errors of zero counts as 0."""
+    frames = np.asarray(frames, np.int64)
+    keys = np.sort(np.asarray(keyframes, np.int64))
+    lag = lags["lag_frames"].where(lags["lag_frames"].abs() > SIGNIFICANT_SIGMAS * lags["sigma_frames"], 0.0)
+    vec = np.c_[lag.to_numpy(), lags[list(FIELD_COLUMNS)].to_numpy()] if len(lags) else np.zeros((0, 7))
+    sides = list(zip(lags["keyframe"].astype(int), lags["side"], strict=True))
+    after = {k: vec[i] for i, (k, s) in enumerate(sides) if s > 0}
+    before = {k: vec[i] for i, (k, s) in enumerate(sides) if s < 0}
+    out = np.full((len(frames), 7), np.nan)
+    for i, f in enumerate(frames):
+        if np.isin(f, keys):
+            out[i] = 0.0
+            continue
+        prev, nxt = keys[keys < f].max(initial=-1), keys[keys > f].min(initial=-1)
+        a, b = after.get(int(prev)), before.get(int(nxt))
+        if a is not None and b is not None:
+            out[i] = a + (b - a) * (f - prev) / (nxt - prev)
+        elif a is not None or b is not None:
+            out[i] = a if a is not None else b
+    return out
+
+
+def lag_per_frame(frames: np.ndarray, keyframes: np.ndarray, lags: pd.DataFrame) -> np.ndarray:
+    """The lag (frames) of each of ``frames`` (:func:`_coefficients`' first column): 0 at
+    keyframes, NaN where no side is measured (no correction possible)."""
+    return _coefficients(frames, keyframes, lags)[:, 0]
+
+
+def _velocity(frames: np.ndarray, uv: np.ndarray) -> np.ndarray:
+    """Each dot's velocity (pixels per frame) at each frame from its own centroids: the
+    derivative of the piecewise-linear path through them (central where both neighbours are
+    reported, one-sided at the ends), NaN where it has no reported neighbour."""
+    t = frames.astype(np.float64)
+    vel = np.full_like(uv, np.nan)
+    for j in range(uv.shape[1]):
+        for c in range(2):
+            x = uv[:, j, c]
+            ok = np.isfinite(x)
+            if ok.sum() >= 2:
+                filled = np.interp(t, t[ok], x[ok], left=np.nan, right=np.nan)
+                vel[:, j, c] = np.gradient(filled, t) if len(t) > 1 else np.nan
+    return vel
+
+
+def correct_lag(tracks: pd.DataFrame, keyframes: np.ndarray, lags: pd.DataFrame) -> pd.DataFrame:
+    """A copy of one camera's ``tracks`` with every P frame's reported membrane dots moved by
+    the frame's departure from the keyframes (:func:`estimate_lag`, interpolated in time by
+    :func:`_coefficients`): forward along the dot's velocity by the lag, and back by the
+    affine field. Keyframes, other targets and frames with nothing measured are left as they are."""
+    mem = (tracks["id"] >= FIRST_MEMBRANE_ID).to_numpy()
+    frames, ids, uv = _positions(tracks[mem])
+    coef = np.nan_to_num(_coefficients(frames, keyframes, lags))
+    if not coef.any():
+        return tracks.copy()
+    vel = np.nan_to_num(_velocity(frames, uv))
+    x = np.nan_to_num(uv) / FIELD_SCALE_PX
+    c = coef[:, None, :]
+    shift = np.stack([
+        c[..., 0] * vel[..., 0] + c[..., 1] + c[..., 2] * x[..., 0] + c[..., 3] * x[..., 1],
+        c[..., 0] * vel[..., 1] + c[..., 4] + c[..., 5] * x[..., 0] + c[..., 6] * x[..., 1],
+    ], axis=-1)  # fmt: skip
+    out = tracks.copy()
+    rep = mem & (out["reason"] == "").to_numpy()
+    fi = np.searchsorted(frames, out.loc[rep, "frame"].to_numpy(np.int64))
+    ii = np.searchsorted(ids, out.loc[rep, "id"].to_numpy(np.int64))
+    s = shift[fi, ii]
+    out.loc[rep, "u_px"] = out.loc[rep, "u_px"].to_numpy() + s[:, 0]
+    out.loc[rep, "v_px"] = out.loc[rep, "v_px"].to_numpy() + s[:, 1]
+    return out
+
+
+def keyframe_test_frames(fmap: pd.DataFrame, video_keyframes: np.ndarray) -> np.ndarray:
+    """The test frames (sorted) whose picture is one of the video's keyframes
+    (:func:`triaxtrack.video.keyframe_indices`), through the camera's ``FRAME_MAP``."""
+    rec = fmap[~fmap["missing"].astype(bool)]
+    hit = rec["video_index"].isin(np.asarray(video_keyframes, np.int64))
+    return np.sort(rec.loc[hit, "frame"].to_numpy(np.int64))
+
+
+def lag_corrected(tracks: pd.DataFrame, keyframes: np.ndarray) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """One camera's ``tracks`` with the codec's motion lag measured at its ``keyframes`` (test
+    frames) and removed: ``(corrected tracks, lags)`` (:func:`estimate_lag`'s table)."""
+    lags = estimate_lag(tracks, keyframes)
+    return correct_lag(tracks, keyframes, lags), lags

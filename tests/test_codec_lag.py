@@ -1,0 +1,105 @@
+"""The codec's motion lag: measured at keyframes against synthetic truth, and removed."""
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from triaxtrack.codec_lag import estimate_lag, keyframe_test_frames, lag_corrected, lag_per_frame
+
+FRAMES = np.arange(61)
+KEYS = np.array([0, 30, 60])
+
+
+def _tracks(
+    lag: float, noise: float, speed: float = 0.3, seed: int = 0, accel: float = 0.004
+) -> tuple[pd.DataFrame, np.ndarray]:
+    """400 dots on accelerating paths (pixels), P frames shown ``lag`` frames late, centroid
+    noise ``noise`` px; returns (tracks, true positions (F, N, 2))."""
+    rng = np.random.default_rng(seed)
+    n = 400
+    start = rng.uniform(100, 900, (n, 2))
+    vel = speed * rng.normal(size=(n, 2))
+    acc = accel * rng.normal(size=(n, 2))
+
+    def at(t):
+        return start + vel * t[:, None, None] + 0.5 * acc * t[:, None, None] ** 2
+
+    t = FRAMES.astype(float)
+    truth = at(t)
+    shown = np.where(np.isin(FRAMES, KEYS)[:, None, None], truth, at(t - lag))
+    uv = shown + rng.normal(0, noise, shown.shape)
+    rows = pd.DataFrame({
+        "camera": "cam01", "frame": np.repeat(FRAMES, n),
+        "id": np.tile(np.arange(1001, 1001 + n), len(FRAMES)),
+        "u_px": uv[:, :, 0].ravel(), "v_px": uv[:, :, 1].ravel(), "area_px": 20.0, "sigma_px": noise,
+        "reason": "",
+    })  # fmt: skip
+    return rows, truth
+
+
+def _along_velocity_error(tracks: pd.DataFrame, truth: np.ndarray, frames) -> float:
+    """Mean error along the motion (pixels) over the given frames: negative = behind."""
+    t = tracks.sort_values(["frame", "id"])
+    uv = t[["u_px", "v_px"]].to_numpy().reshape(len(FRAMES), -1, 2)
+    vel = np.gradient(truth, axis=0)
+    e = ((uv - truth) * vel / np.linalg.norm(vel, axis=2, keepdims=True)).sum(axis=2)
+    return float(e[list(frames)].mean())
+
+
+def test_lag_measured_on_both_sides_of_every_keyframe():
+    tracks, _ = _tracks(lag=0.025, noise=0.015)
+    lags = estimate_lag(tracks, KEYS)
+    assert sorted(zip(lags["keyframe"], lags["side"], strict=True)) == [(0, 1), (30, -1), (30, 1), (60, -1)]
+    # unbiased within its own standard error (a velocity from the same frames would add ~0.02)
+    assert np.all(np.abs(lags["lag_frames"] - 0.025) < 3 * lags["sigma_frames"])
+    assert np.all(lags["sigma_frames"] < 0.005)
+
+
+def test_correction_removes_the_lag_and_leaves_keyframes_alone():
+    tracks, truth = _tracks(lag=0.03, noise=0.01)
+    p_frames = [f for f in FRAMES if f not in KEYS]
+    before = _along_velocity_error(tracks, truth, p_frames)
+    fixed, _ = lag_corrected(tracks, KEYS)
+    after = _along_velocity_error(fixed, truth, p_frames)
+    assert before == pytest.approx(-0.03 * 0.3 * np.sqrt(np.pi / 2), rel=0.2)  # mean speed x lag
+    assert abs(after) < 0.1 * abs(before)
+    keys = fixed["frame"].isin(KEYS)
+    assert np.array_equal(fixed.loc[keys, "u_px"].to_numpy(), tracks.loc[keys, "u_px"].to_numpy())
+    assert tracks["u_px"].to_numpy() is not fixed["u_px"].to_numpy()
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_dots_at_rest_are_not_moved(seed):
+    tracks, _ = _tracks(lag=0.03, noise=0.015, speed=0.0, accel=0.0, seed=seed)
+    fixed, lags = lag_corrected(tracks, KEYS)
+    assert len(lags) == 4  # measured: no lag distinguishable from zero, so none applied
+    assert np.abs(fixed[["u_px", "v_px"]] - tracks[["u_px", "v_px"]]).to_numpy().max() == 0
+
+
+def test_no_keyframe_measured_means_no_correction():
+    tracks, _ = _tracks(lag=0.03, noise=0.01)
+    fixed, lags = lag_corrected(tracks, np.array([], np.int64))
+    assert lags.empty
+    assert fixed.equals(tracks)
+    assert np.isnan(lag_per_frame(np.array([5]), np.array([0]), lags)).all()
+
+
+def test_keyframe_test_frames_follow_the_frame_map():
+    fmap = pd.DataFrame(
+        {"frame": [0, 1, 2, 3], "video_index": [3, 4, 5, 6], "missing": [False, False, True, False]}
+    )
+    assert keyframe_test_frames(fmap, np.array([0, 4, 5])).tolist() == [1]
+
+
+def test_a_field_across_the_image_is_removed_too():
+    """P frames shrunk horizontally about the image centre (as the simulator's H.264 shows the
+    membrane dots) besides lagging: the corrected P frames agree with the truth."""
+    tracks, truth = _tracks(lag=0.02, noise=0.01)
+    p = ~tracks["frame"].isin(KEYS)
+    shrunk = tracks.assign(u_px=np.where(p, 500 + (tracks["u_px"] - 500) * (1 - 3e-4), tracks["u_px"]))
+    fixed, lags = lag_corrected(shrunk, KEYS)
+    assert np.allclose(lags["u_per_u"], 3e-4 * 1000, rtol=0.2)
+    sel = fixed.sort_values(["frame", "id"])
+    uv = sel[["u_px", "v_px"]].to_numpy().reshape(len(FRAMES), -1, 2)
+    err = (uv - truth)[[f for f in FRAMES if f not in KEYS]]
+    assert abs(err[..., 0].mean()) < 0.002 and np.sqrt((err**2).mean()) < 0.02
