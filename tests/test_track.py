@@ -134,6 +134,24 @@ def test_merged_and_lost_blobs_are_flagged():
     assert 25 <= area[1] <= 37 and mass[1] > 25 * 150
 
 
+@pytest.mark.parametrize("radius", [9.5, 33.5])  # a window of 25 and of 73 columns (the two growings)
+def test_the_blob_is_all_the_ink_connected_within_its_disc(radius):
+    """A dot trailing a thin two-turn spiral inside its disc: the blob is all of it, however far
+    round the way (the ink connected to the centre), and its centroid that of all its pixels
+    (equally dark, on an exactly white ground)."""
+    size = int(4 * radius)
+    img = np.full((size, size), 200, np.uint8)
+    c = size // 2
+    cv2.circle(img, (c, c), int(radius // 4), 20, -1)
+    t = np.linspace(0, 4 * np.pi, 400)
+    r = radius // 4 + (radius - radius // 4 - 2.5) * t / t[-1]
+    cv2.polylines(img, [np.c_[c + r * np.cos(t), c + r * np.sin(t)].round().astype(np.int32)], False, 20, 1)
+    m = measure_targets(img, np.array([[c + 0.2, c - 0.1]]), np.array([radius]))
+    ys, xs = np.nonzero(img == 20)
+    assert m.reason[0] == "" and m.area[0] == len(xs)
+    assert np.allclose(m.uv[0], [xs.mean(), ys.mean()], atol=1e-9)
+
+
 def test_processed_frames_and_chunk_plan():
     assert processed_frames(5, 15.0, None).tolist() == [0, 1, 2, 3, 4]
     # one frame every 5 s at 15 fps, and always the last frame

@@ -200,3 +200,42 @@ def test_writer_validates_frames(tmp_path: Path):
         VideoWriter(tmp_path / "odd.mp4", W + 1, H, FPS)
     with pytest.raises(ValueError, match="codec"):
         VideoWriter(tmp_path / "x.mp4", W, H, FPS, codec="vp9")
+
+
+def _gray_by_conversion(path: Path) -> list[np.ndarray]:
+    with av.open(str(path)) as container:
+        return [f.to_ndarray(format="gray") for f in container.decode(video=0)]
+
+
+def test_full_range_frames_are_the_luma_plane_itself(tmp_path: Path):
+    """A full-range video (the project's own): each frame is the decoder's luma plane, read-only
+    (the decoder may still predict from it), with the values of to_ndarray(format='gray'), also
+    where the plane's rows are padded (line_size > width)."""
+    path = tmp_path / "full.mp4"
+    encode_video(make_frames(4), path, FPS, codec="h264")
+    with av.open(str(path)) as container:
+        frame = next(container.decode(video=0))
+        assert frame.format.name == "yuvj420p" and frame.planes[0].line_size > W
+    got = [img for _, img in iter_frames(path)]
+    assert len(got) == 4 and all(not img.flags.writeable and img.shape == (H, W) for img in got)
+    for img, ref in zip(got, _gray_by_conversion(path), strict=True):
+        assert np.array_equal(img, ref)
+
+
+def test_limited_range_frames_are_converted(tmp_path: Path):
+    """A limited-range video (most cameras' yuv420p): the frames are to_ndarray(format='gray')'s,
+    16..235 stretched to 0..255, not the raw luma plane."""
+    path = tmp_path / "tv.mp4"
+    with av.open(str(path), "w") as container:
+        stream = container.add_stream("libx264", rate=FPS)
+        stream.width, stream.height, stream.pix_fmt = W, H, "yuv420p"
+        for img in make_frames(3):
+            frame = av.VideoFrame.from_ndarray(img, format="gray").reformat(format="yuv420p")
+            for packet in stream.encode(frame):
+                container.mux(packet)
+        for packet in stream.encode():
+            container.mux(packet)
+    got = [img for _, img in iter_frames(path)]
+    ref = _gray_by_conversion(path)
+    assert len(got) == 3 and all(np.array_equal(a, b) for a, b in zip(got, ref, strict=True))
+    assert min(int(img.min()) for img in got) < 16  # stretched: the raw luma plane holds 16..235

@@ -3,12 +3,13 @@
 ``tracking`` (the default): the first ``--frames`` frames (default 24) of one camera of a simulated
 ``--test-frames``-frame test (default 100, as the workflow's demo: the dots move as fast per frame)
 are rendered at ``--size`` (default 3840x2160) and written as H.264 (the simulation defaults: crf 14,
-veryfast; all in a child process), and on that one video this prints
+veryfast), and the same frames re-encoded as H.265 (``--codecs``; all in a child process); this prints
 
-* the decode-only frame rate (decoding to grey frames as the pipeline does,
+* per codec, the decode-only frame rate (decoding to grey frames as the pipeline does,
   :func:`triaxtrack.frames.iter_test_frames`), and the whole pipeline's (decoding and
   :func:`triaxtrack.track.track_frames` on the same stream, from the first frame's labels of
-  :func:`triaxtrack.identify.label_frame`), and their ratio;
+  :func:`triaxtrack.identify.label_frame`), and their ratio (the tracker's compiled kernels are
+  loaded, or compiled, before any timing: once per process);
 * the tracking cost per camera-frame beyond decoding: (pipeline - decode) / frames, and timed
   directly on a few frames held in memory (``--hold``), with the share of ``_step`` and
   ``measure_targets``;
@@ -26,6 +27,7 @@ with the number of targets labelled (frames rendered by the simulator, exact tru
 from __future__ import annotations
 
 import argparse
+import itertools
 import resource
 import subprocess
 import sys
@@ -38,6 +40,7 @@ import numpy as np
 import pandas as pd
 
 KIT_DESIGN = Path(__file__).resolve().parents[2] / "config" / "kit.yaml"
+_CODEC_NAMES = {"h264": "H.264", "h265": "H.265"}
 
 
 def bench_simulate(width: int, height: int, frames: int, cameras: int = 2) -> dict:
@@ -141,11 +144,13 @@ def _log(msg: str) -> None:
     print(f"[bench] {msg}", file=sys.stderr, flush=True)
 
 
-def _simulate_clip(tmp: str, width: str, height: str, frames: str, test_frames: str, seed: str) -> None:
+def _simulate_clip(tmp: str, width: str, height: str, frames: str, test_frames: str, seed: str,
+                   h265: str) -> None:  # fmt: skip
     """Run in a child process by :func:`_render_video` (arguments as strings): export the kit,
-    write the scene and render the clip of the first camera."""
+    write the scene and render the clip of the first camera (and re-encode it as H.265)."""
     from triaxtrack.kit import export_kit, load_design
     from triaxtrack.simulate import camera_names, make_scene, render_chunk
+    from triaxtrack.video import VideoWriter, iter_frames
 
     root = Path(tmp)
     export_kit(load_design(KIT_DESIGN), root / "kit")
@@ -153,6 +158,10 @@ def _simulate_clip(tmp: str, width: str, height: str, frames: str, test_frames: 
     make_scene(cfg, root / "kit", root / "test", "bench")
     camera = camera_names(cfg.cameras)[0]
     render_chunk(root / "test", camera, 0, int(frames), root / "video.mp4", root / "truth.parquet")
+    if h265 == "1":
+        with VideoWriter(root / "video265.mp4", cfg.width, cfg.height, cfg.fps, "h265", cfg.crf) as writer:
+            for _, img in iter_frames(root / "video.mp4"):
+                writer.write(img)
 
 
 def _clip_config(width: int, height: int, frames: int, test_frames: int, seed: int):
@@ -161,10 +170,12 @@ def _clip_config(width: int, height: int, frames: int, test_frames: int, seed: i
     return SimulationConfig(frames=max(frames, test_frames), width=width, height=height, seed=seed)
 
 
-def _render_video(tmp: Path, width: int, height: int, frames: int, test_frames: int, seed: int) -> dict:
+def _render_video(tmp: Path, width: int, height: int, frames: int, test_frames: int, seed: int,
+                  h265: bool = False) -> dict:  # fmt: skip
     """The first ``frames`` frames of one camera of a simulated test of ``test_frames`` frames (the
-    simulation defaults otherwise: the dots move as fast per frame as in the workflow's demo),
-    made in a child process (the kit export's and renderer's memory do not count in this one's)."""
+    simulation defaults otherwise: the dots move as fast per frame as in the workflow's demo), and
+    with ``h265`` the same frames re-encoded as H.265, made in a child process (the kit export's
+    and renderer's memory do not count in this one's)."""
     from triaxtrack.simulate import camera_names
 
     cfg = _clip_config(width, height, frames, test_frames, seed)
@@ -172,10 +183,11 @@ def _render_video(tmp: Path, width: int, height: int, frames: int, test_frames: 
     _log(f"rendering {frames} frames of {camera} at {width}x{height} ...")
     t0 = time.perf_counter()
     code = "import sys; from triaxtrack.bench import _simulate_clip; _simulate_clip(*sys.argv[1:])"
-    argv = [str(x) for x in (tmp, width, height, frames, test_frames, seed)]
+    argv = [str(x) for x in (tmp, width, height, frames, test_frames, seed, int(h265))]
     subprocess.run([sys.executable, "-c", code, *argv], check=True)
     return {"cfg": cfg, "camera": camera, "test": tmp / "test", "video": tmp / "video.mp4",
-            "observations": tmp / "truth.parquet", "render_s": time.perf_counter() - t0}  # fmt: skip
+            "video265": tmp / "video265.mp4", "observations": tmp / "truth.parquet",
+            "render_s": time.perf_counter() - t0}  # fmt: skip
 
 
 class _Timed:
@@ -233,7 +245,7 @@ def _link_errors(linked: pd.DataFrame, tracks: pd.DataFrame, tol_px: float = 1.0
 
 
 def bench_tracking(width: int, height: int, frames: int, hold: int = 6, test_frames: int = 100,
-                   seed: int = 1, repeat: int = 3) -> dict:  # fmt: skip
+                   seed: int = 1, repeat: int = 3, codecs: tuple = ("h264", "h265")) -> dict:  # fmt: skip
     """Decode vs decode + tracking on one simulated camera's video (module docstring)."""
     import triaxtrack.track as track
     from triaxtrack.detect import detect_blobs
@@ -245,8 +257,9 @@ def bench_tracking(width: int, height: int, frames: int, hold: int = 6, test_fra
 
     r: dict = {"peak_mb": {}}
     with tempfile.TemporaryDirectory(prefix="triaxtrack-bench-") as tmp:
-        sim = _render_video(Path(tmp), width, height, frames, test_frames, seed)
+        sim = _render_video(Path(tmp), width, height, frames, test_frames, seed, "h265" in codecs)
         video, camera, cfg = sim["video"], sim["camera"], sim["cfg"]
+        videos = {c: sim["video265" if c == "h265" else "video"] for c in codecs}
         r.update(
             camera=camera,
             sim=cfg,
@@ -254,6 +267,7 @@ def bench_tracking(width: int, height: int, frames: int, hold: int = 6, test_fra
             render_peak_mb=_maxrss_mb(resource.RUSAGE_CHILDREN),
             video=probe_video(video),
             video_mb=video.stat().st_size / 2**20,
+            codecs={c: videos[c].stat().st_size / 2**20 for c in codecs},
         )
         n = r["video"]["frames"]
         fmap = frame_map(CameraTiming(camera, cfg.fps), n, n)
@@ -270,28 +284,31 @@ def bench_tracking(width: int, height: int, frames: int, hold: int = 6, test_fra
         own = labels[labels["id"] > 0]
         r["labelled"], r["detections"] = own["id"].nunique(), len(labels)
         r["spacing_px"] = track._init_state(labels, tcfg).spacing
+        t0 = time.perf_counter()  # the compiled kernels: loaded from numba's cache (or compiled)
+        track.track_frames([(0, first)], labels, camera, [0], tcfg)
+        r["warmup_s"] = time.perf_counter() - t0
 
-        def decode() -> int:
-            count = 0
-            for _, img in iter_test_frames(video, fmap, 0, n):
-                count += img is not None
-            return count
+        def decode(path: Path) -> int:
+            return sum(img is not None for _, img in iter_test_frames(path, fmap, 0, n))
 
-        def pipeline() -> pd.DataFrame:
-            return track.track_frames(iter_test_frames(video, fmap, 0, n), labels, camera, range(n), tcfg)
+        def pipeline(path: Path) -> pd.DataFrame:
+            return track.track_frames(iter_test_frames(path, fmap, 0, n), labels, camera, range(n), tcfg)
 
-        _log(f"decode only and decode + tracking, {repeat} times each ...")
-        times: dict[str, list[float]] = {"decode": [], "pipeline": []}
+        _log(f"decode only and decode + tracking, {repeat} times each ({', '.join(codecs)}) ...")
+        times: dict[tuple, list[float]] = {}
+        stages = (("decode", decode), ("pipeline", pipeline))
         for _ in range(repeat):  # alternate, so that a slow spell of the machine hits both
-            for name, fn in (("decode", decode), ("pipeline", pipeline)):
+            for (codec, path), (name, fn) in itertools.product(videos.items(), stages):
                 _reset_peak()
                 t0 = time.perf_counter()
-                out = fn()
-                times[name].append(time.perf_counter() - t0)
-                r["peak_mb"][name] = max(r["peak_mb"].get(name, 0.0), _peak_mb())
-                if name == "pipeline":
+                out = fn(path)
+                times.setdefault((codec, name), []).append(time.perf_counter() - t0)
+                stage = name if codec == "h264" else f"{name} {_CODEC_NAMES[codec]}"
+                r["peak_mb"][stage] = max(r["peak_mb"].get(stage, 0.0), _peak_mb())
+                if (codec, name) == (codecs[0], "pipeline"):
                     tracks = out
-        r["decode_s"], r["pipeline_s"] = min(times["decode"]), min(times["pipeline"])
+        r["decode_s"] = {c: min(times[c, "decode"]) for c in codecs}
+        r["pipeline_s"] = {c: min(times[c, "pipeline"]) for c in codecs}
         r["tracks"] = tracks
 
         _log(f"tracking on {hold} decoded frames held in memory ...")
@@ -420,13 +437,13 @@ def print_tracking(r: dict, benchmarks: Path) -> None:
     ok = tracks["reason"] == ""
     per_frame = ok.groupby(tracks["frame"]).sum()
     med_step, max_step = r["motion_px"]
-    dec_fps, pipe_fps = n / r["decode_s"], n / r["pipeline_s"]
-    beyond_ms = (r["pipeline_s"] - r["decode_s"]) / n * 1e3
     direct_ms = r["direct_s"] * 1e3
     t = r["truth"]
+    h265 = f"; re-encoded as H.265 (libx265 crf {sim.crf}, veryfast), {r['codecs'].get('h265', 0):.1f} MB"
     lines = [
         f"Tracking benchmark on one video: {v['width']}x{v['height']} {v['codec']} (libx264 crf {sim.crf}, "
-        f"veryfast, grey in yuv420p), {n} frames at {v['fps']:g} fps, {r['video_mb']:.1f} MB",
+        f"veryfast, grey in yuv420p), {n} frames at {v['fps']:g} fps, {r['video_mb']:.1f} MB"
+        + (h265 if "h265" in r["codecs"] else ""),
         f"  camera {r['camera']}, frames 0..{n - 1} of a simulated {sim.frames}-frame test (seed {sim.seed}; "
         f"axial strain {sim.axial_strain:g} and bulge {sim.bulge_mm:g} mm at its end)",
         f"  kit export, scene and rendering: {r['render_s']:.0f} s ({r['render_s'] / n:.1f} s/frame; in a "
@@ -439,33 +456,38 @@ def print_tracking(r: dict, benchmarks: Path) -> None:
         f"{t['wrong']} of {t['compared']} farther than 1 px",
         f"  spacing to the nearest detection: median {np.median(r['spacing_px']):.1f} px, so the gate "
         f"({track_gate():g} x spacing) is {r['search_range_px']:.1f} px (median)",
+        f"  the tracker's compiled (numba) kernels loaded before the timings: {r['warmup_s']:.1f} s, once "
+        "per process (compiled and cached on disk the first time)",
     ]
     print("\n".join(lines))
     print()
-    rows = [
-        ("Throughput (same video, same run; best of the repeats)", "", "", ""),
-        (
-            "decode only (iter_test_frames)",
-            f"{dec_fps:.1f}",
-            "frames/s",
-            f"{r['decode_s']:.2f} s for {n} frames",
-        ),
-        (
-            "pipeline: decode + track_frames",
-            f"{pipe_fps:.1f}",
-            "frames/s",
-            f"{r['pipeline_s']:.2f} s for {n} frames",
-        ),
-        ("ratio pipeline / decode", f"{pipe_fps / dec_fps:.2f}", "", "aim >= 0.8"),
-        (f"Tracking cost per {v['width']}x{v['height']} camera-frame beyond decoding", "", "", ""),
-        ("(pipeline - decode) / frames", f"{beyond_ms:.1f}", "ms/frame", "aim <= 3 ms"),
+    rows, beyond = [("Throughput (same video, same run; best of the repeats)", "", "", "")], []
+    for codec, dec in r["decode_s"].items():
+        pipe, name = r["pipeline_s"][codec], "" if len(r["codecs"]) == 1 else f"{_CODEC_NAMES[codec]}: "
+        rows += [
+            (f"{name}decode only (iter_test_frames)", f"{n / dec:.1f}", "frames/s", f"{dec:.2f} s for {n}"
+             " frames"),
+            (f"{name}pipeline: decode + track_frames", f"{n / pipe:.1f}", "frames/s", f"{pipe:.2f} s for {n}"
+             " frames"),
+            (f"{name}ratio pipeline / decode", f"{dec / pipe:.2f}", "", "aim >= 0.8"),
+        ]  # fmt: skip
+        beyond.append((f"{name}(pipeline - decode) / frames", f"{(pipe - dec) / n * 1e3:.1f}", "ms/frame",
+                       "aim <= 3 ms"))  # fmt: skip
+    rows.append((f"Tracking cost per {v['width']}x{v['height']} camera-frame beyond decoding", "", "", ""))
+    rows += beyond
+    rows += [
         (
             "timed on decoded frames in memory",
             f"{direct_ms:.1f}",
             "ms/frame",
             f"track_frames on {r['held']} held frames, best of 3",
         ),
-        ("  of which _step", f"{r['step_s'] * 1e3:.1f}", "ms/frame", "the rest: the per-frame table rows"),
+        (
+            "  of which _step",
+            f"{r['step_s'] * 1e3:.1f}",
+            "ms/frame",
+            "the rest: set-up (once a chunk), table",
+        ),
         ("  of which measure_targets", f"{r['measure_s'] * 1e3:.1f}", "ms/frame", "inside _step"),
         ("Brute force: detect and label every frame", "", "", ""),
         (
@@ -575,6 +597,7 @@ def main(argv: list[str] | None = None) -> None:
                    help="tracking: the clip is the first --frames frames of a test this long (default 100, "
                         "the workflow demo's: the dots move as fast per frame)")  # fmt: skip
     p.add_argument("--repeat", type=int, default=3, help="tracking: runs of decode and pipeline (best taken)")
+    p.add_argument("--codecs", default="h264,h265", help="tracking: h264 (rendered) and/or h265 (re-encoded)")
     p.add_argument("--benchmarks", type=Path, default=Path("benchmarks"),
                    help="tracking: Snakemake's benchmark folder (default ./benchmarks)")  # fmt: skip
     p.add_argument("--sizes", default="1280x720,1920x1080,3840x2160", help="simulate, identify: sizes")
@@ -585,10 +608,13 @@ def main(argv: list[str] | None = None) -> None:
         p.error(f"what: choose among tracking, simulate, identify, not {args.what}")
     if args.frames < 2 or args.hold < 1 or args.repeat < 1:
         p.error("--frames must be >= 2, --hold and --repeat >= 1")
+    codecs = tuple(c.strip().lower() for c in args.codecs.split(","))
+    if not codecs or set(codecs) - set(_CODEC_NAMES):
+        p.error(f"--codecs: h264 and/or h265, not {args.codecs!r}")
     if "tracking" in args.what:
         w, h = args.size
         print_tracking(
-            bench_tracking(w, h, args.frames, args.hold, args.test_frames, repeat=args.repeat),
+            bench_tracking(w, h, args.frames, args.hold, args.test_frames, repeat=args.repeat, codecs=codecs),
             args.benchmarks,
         )
     sizes = [_size(size) for size in args.sizes.split(",")]

@@ -58,9 +58,11 @@ test frames (``triaxtrack.frames``).
 
 from __future__ import annotations
 
+import math
 from collections.abc import Collection, Iterable
 from dataclasses import dataclass, fields
 
+import numba
 import numpy as np
 import pandas as pd
 from scipy.spatial import cKDTree
@@ -208,21 +210,102 @@ def _affine_flow(
     """Each target's displacement predicted by the affine motion of its reported neighbours:
     ``(pred (n, 2), valid (n,))`` from the displacements ``disp`` (n, 2) of the ``ok`` ones.
     ``neighbours`` (n, k) indices (n: none) replace the fixed ``state.neighbours``."""
-    n = len(state.ids)
     nb = state.neighbours if neighbours is None else neighbours
-    pad_ok = np.r_[ok, False]
-    pad_ref = np.vstack([state.ref_uv, np.zeros((1, 2))])
-    pad_disp = np.vstack([np.where(ok[:, None], disp, 0.0), np.zeros((1, 2))])
-    w = pad_ok[nb].astype(np.float64)  # (n, k)
-    dx = np.nan_to_num(pad_ref[nb] - state.ref_uv[:, None, :])  # (n, k, 2)
-    A = np.concatenate([dx, np.ones((n, nb.shape[1], 1))], axis=2)  # (n, k, 3)
-    M = np.einsum("nk,nki,nkj->nij", w, A, A) + 1e-6 * np.eye(3)
-    rhs = np.einsum("nk,nki,nkj->nij", w, A, pad_disp[nb])  # (n, 3, 2)
-    valid = (w.sum(axis=1) >= MIN_FLOW_NEIGHBOURS) & np.isfinite(state.ref_uv).all(axis=1)
-    sol = np.zeros((n, 3, 2))
-    if valid.any():
-        sol[valid] = np.linalg.solve(M[valid], rhs[valid])
-    return sol[:, 2, :], valid
+    return _flow_kernel(state.ref_uv, disp, ok, nb)
+
+
+@numba.njit(cache=True)
+def _flow_kernel(
+    ref_uv: np.ndarray, disp: np.ndarray, ok: np.ndarray, nb: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`_affine_flow`: per target, the least-squares affine map ``d = a + B dx`` of its ``ok``
+    neighbours' displacements ``d`` over their offsets ``dx`` at the reference frame (normal
+    equations, 1e-6 added to the diagonal, solved by Gaussian elimination with partial pivoting);
+    its constant term ``a`` is the prediction. Zero where not valid (too few neighbours, or no
+    reference position)."""
+    n = len(ref_uv)
+    pred, valid = np.zeros((n, 2)), np.zeros(n, np.bool_)
+    a, rhs = np.empty((3, 3)), np.empty((3, 2))
+    for i in range(n):
+        if not (np.isfinite(ref_uv[i, 0]) and np.isfinite(ref_uv[i, 1])):
+            continue
+        xx = xy = x = yy = y = used = xu = xv = yu = yv = u = v = 0.0  # sums of the normal equations
+        for k in range(nb.shape[1]):
+            j = nb[i, k]
+            if j >= n or not ok[j]:
+                continue
+            dx, dy, du, dv = ref_uv[j, 0] - ref_uv[i, 0], ref_uv[j, 1] - ref_uv[i, 1], disp[j, 0], disp[j, 1]
+            xx, xy, x, yy, y, used = xx + dx * dx, xy + dx * dy, x + dx, yy + dy * dy, y + dy, used + 1.0
+            xu, xv, yu, yv, u, v = xu + dx * du, xv + dx * dv, yu + dy * du, yv + dy * dv, u + du, v + dv
+        if used < MIN_FLOW_NEIGHBOURS:
+            continue
+        a[0, 0], a[0, 1], a[0, 2], rhs[0, 0], rhs[0, 1] = xx + 1e-6, xy, x, xu, xv
+        a[1, 0], a[1, 1], a[1, 2], rhs[1, 0], rhs[1, 1] = xy, yy + 1e-6, y, yu, yv
+        a[2, 0], a[2, 1], a[2, 2], rhs[2, 0], rhs[2, 1] = x, y, used + 1e-6, u, v
+        _solve3(a, rhs)
+        pred[i, 0], pred[i, 1], valid[i] = rhs[2, 0], rhs[2, 1], True
+    return pred, valid
+
+
+@numba.njit(cache=True)
+def _solve3(a: np.ndarray, rhs: np.ndarray) -> None:
+    """Solve ``a x = rhs`` (3 x 3, two right-hand sides) in place (``x`` into ``rhs``; ``a``
+    overwritten) by Gaussian elimination with partial pivoting, as LAPACK's gesv."""
+    for c in range(3):
+        p = c
+        for r in range(c + 1, 3):
+            if abs(a[r, c]) > abs(a[p, c]):
+                p = r
+        for k in range(3):
+            a[c, k], a[p, k] = a[p, k], a[c, k]
+        for k in range(2):
+            rhs[c, k], rhs[p, k] = rhs[p, k], rhs[c, k]
+        inv = 1.0 / a[c, c]
+        for r in range(c + 1, 3):
+            f = a[r, c] * inv
+            for k in range(c, 3):
+                a[r, k] -= f * a[c, k]
+            for k in range(2):
+                rhs[r, k] -= f * rhs[c, k]
+    for r in range(2, -1, -1):
+        for k in range(2):
+            for q in range(r + 1, 3):
+                rhs[r, k] -= a[r, q] * rhs[q, k]
+            rhs[r, k] /= a[r, r]
+
+
+@numba.njit(cache=True)
+def _nearest_within(uv: np.ndarray, reach: np.ndarray) -> np.ndarray:
+    """For each of the points ``uv`` (n, 2): the nearest other one closer than ``reach[i]`` (index,
+    -1 where none), sought in its own and the neighbouring bands of v as wide as the largest
+    reach, each band sorted by u."""
+    n = len(uv)
+    out = np.full(n, -1, np.int64)
+    lo_v, span_v = uv[:, 1].min(), uv[:, 1].max() - uv[:, 1].min()
+    width = max(reach.max(), span_v / n, 1e-9)
+    width = width if np.isfinite(width) else span_v + 1.0
+    band = np.floor((uv[:, 1] - lo_v) / width).astype(np.int64)  # at most n + 1 bands
+    order = np.argsort(band * (uv[:, 0].max() - uv[:, 0].min() + 1.0) + uv[:, 0] - uv[:, 0].min())
+    u = uv[order, 0]
+    start = np.full(band.max() + 4, n)  # band b's points: order[start[b + 1]:start[b + 2]]
+    start[:2] = 0
+    start[2:-1] = np.cumsum(np.bincount(band))
+    for i in range(n):
+        best = reach[i]
+        for b in range(band[i] - 1, band[i] + 2):
+            lo, end = start[b + 1], start[b + 2]
+            hi = end
+            while lo < hi:  # the band's first point with u >= u_i - best
+                mid = (lo + hi) // 2
+                lo, hi = (mid + 1, hi) if u[mid] < uv[i, 0] - best else (lo, mid)
+            for a in range(lo, end):
+                if u[a] > uv[i, 0] + best:
+                    break
+                j = order[a]
+                d = math.sqrt((uv[j, 0] - uv[i, 0]) ** 2 + (uv[j, 1] - uv[i, 1]) ** 2)
+                if j != i and d < best:
+                    best, out[i] = d, j
+    return out
 
 
 def _vouchers(state: _State, vouch: np.ndarray, which: np.ndarray) -> np.ndarray:
@@ -294,11 +377,11 @@ def _step(state: _State, gray: np.ndarray | None, cfg: TrackingConfig, first: bo
     jump = measured & (np.linalg.norm(uv - pred, axis=1) > cfg.gate * state.spacing)
     reason[jump & (reason == "")] = "jump"
     cand = np.nonzero(reason == "")[0]
-    if len(cand) > 1:  # two targets on one blob: both dropped
-        d, nearest = cKDTree(uv[cand]).query(uv[cand], k=2)
-        close = d[:, 1] < cfg.min_separation * state.spacing[cand]
+    if len(cand) > 1:  # two targets on one blob (the nearest other one too close): both dropped
+        nearest = _nearest_within(uv[cand], cfg.min_separation * state.spacing[cand])
+        close = nearest >= 0
         reason[cand[close]] = "ambiguous"
-        reason[cand[nearest[close, 1]]] = "ambiguous"
+        reason[cand[nearest[close]]] = "ambiguous"
     # The flow check. Only targets reported in the previous frame (or before a blank one, see
     # below) vouch for their neighbours at first: targets found again must not confirm
     # one another (a whole region can lock one dot over at once); each one that passes then
@@ -319,9 +402,10 @@ def _step(state: _State, gray: np.ndarray | None, cfg: TrackingConfig, first: bo
             break
         off = check & (np.linalg.norm(disp - flow, axis=1) > cfg.max_flow_residual_px)
         drift |= off
-        vouch |= check & ~off
         pending &= ~check
-        flow, valid = _affine_flow(state, disp, vouch)
+        if (check & ~off).any():  # new vouchers: the flow changes
+            vouch |= check & ~off
+            flow, valid = _affine_flow(state, disp, vouch)
     far = pending & np.isfinite(state.ref_uv).all(axis=1)
     if far.any():  # no vouchers among its nearest: the nearest vouching ones within reach
         far_flow, far_valid = _affine_flow(state, disp, vouch, _vouchers(state, vouch, far))
@@ -385,20 +469,24 @@ def track_frames(
     cfg = cfg or TrackingConfig()
     state = _init_state(labels, cfg)
     report = set(int(k) for k in report)
-    parts = []
+    parts: list[tuple] = []
     for i, (k, gray) in enumerate(frames):
         if i == 0 and gray is None:
             raise ValueError(f"{camera}: no picture of the labelled frame {k}")
         uv, area, sigma, reason = _step(state, gray, cfg, first=i == 0)
         if int(k) in report:
-            parts.append(pd.DataFrame({
-                "camera": camera, "frame": int(k), "id": state.ids, "u_px": uv[:, 0], "v_px": uv[:, 1],
-                "area_px": area, "reason": reason.astype(str), "sigma_px": sigma,
-            }))  # fmt: skip
+            parts.append((int(k), uv, area, sigma, reason))
     if not parts:
         cols = ("camera", "frame", "id", "u_px", "v_px", "area_px", "reason", "sigma_px")
         return pd.DataFrame({c: [] for c in cols})
-    return pd.concat(parts, ignore_index=True)
+    frame, uv, area, sigma, reason = zip(*parts, strict=True)  # one table at the end, not one a frame
+    uv = np.concatenate(uv)
+    return pd.DataFrame({
+        "camera": camera, "frame": np.repeat(np.array(frame, np.int64), len(state.ids)),
+        "id": np.tile(state.ids, len(parts)), "u_px": uv[:, 0], "v_px": uv[:, 1],
+        "area_px": np.concatenate(area), "reason": np.concatenate(reason),  # str objects: str dtype
+        "sigma_px": np.concatenate(sigma),
+    })  # fmt: skip
 
 
 @dataclass(frozen=True)

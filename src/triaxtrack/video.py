@@ -434,8 +434,14 @@ def iter_frames(path: PathLike, start: int = 0, stop: int | None = None) -> Iter
 
 
 def _iter_frames(path: PathLike, start: int, stop: int | None) -> Iterator[tuple[int, np.ndarray]]:
+    """The frames of :func:`iter_frames`. A full-range frame whose first plane is the 8-bit luma
+    (the project's own videos) is yielded as that plane itself, read-only (the decoder may still
+    predict from it; ``.copy()`` for an array of one's own): no conversion, no copy. Any other
+    frame goes through ``to_ndarray(format="gray")``, which for limited-range video stretches
+    16..235 to 0..255, so that the values are the same either way."""
     if stop is not None and stop <= start:
         return
+    luma_first = ("yuv420p", "yuvj420p", "nv12", "yuv422p", "yuvj422p", "yuv444p", "yuvj444p")  # 8-bit
     seek = start > 0
     while True:
         with _open_input(path) as container:
@@ -467,7 +473,16 @@ def _iter_frames(path: PathLike, start: int, stop: int | None) -> Iterator[tuple
                         continue
                     if stop is not None and k >= stop:
                         return
-                    yield k, frame.to_ndarray(format="gray")
+                    name = frame.format.name
+                    full = name.startswith("yuvj") or frame.color_range == _AVCOL_RANGE_JPEG
+                    if name == "gray" or (name in luma_first and full):
+                        plane, h, w = frame.planes[0], frame.height, frame.width
+                        luma = np.frombuffer(plane, np.uint8, h * plane.line_size).reshape(h, plane.line_size)
+                        luma = luma[:, :w] if plane.line_size != w else luma
+                        luma.flags.writeable = False
+                        yield k, luma
+                    else:
+                        yield k, frame.to_ndarray(format="gray")
                 else:
                     return
             except av.FFmpegError as exc:

@@ -1,8 +1,7 @@
 """Per-target window measurement for tracking (``triaxtrack.track``): the dark blob nearest a
 predicted position, measured against the window's own white level and noise.
 
-In a square window around each prediction (all targets with the same window size at once, as
-``(m, h, w)`` arrays):
+In a square window around each prediction (half-width the disc's radius rounded up, plus 2):
 
 * the **white level** ``W`` is the mean of the window's pixels between its 70th and 90th
   percentiles (the surface around the dot: dots cover well under 30 % of a window), and the
@@ -27,12 +26,21 @@ In a square window around each prediction (all targets with the same window size
 
 Pixels in OpenCV's convention (the centre of the top-left pixel is (0, 0)); grey levels of the
 8-bit frame.
+
+The measurement is a compiled kernel (numba; compiled once and cached on disk, so the first
+call in a new environment takes some seconds): one pass over each window copies it out of the
+frame and counts its levels in 256-bin histograms (the percentiles and the median are exact, as
+numpy's); then per window, on byte masks padded by a pixel all round (a 3x3 dilation is an OR of
+shifts) or on rows packed into words for the blob growing, with the sums of integers where the
+weights are ``W - grey`` (``sum(w x) = W sum(x) - sum(grey x)``).
 """
 
 from __future__ import annotations
 
+import math
 from typing import NamedTuple
 
+import numba
 import numpy as np
 
 MEAN_SHIFT_STEPS = 3  # re-centring steps of the disc; motion left after prediction is sub-pixel
@@ -52,6 +60,7 @@ ANNULUS_GAP_PX = 1.0  # the annulus starts this far beyond the disc (the blob's 
 # propagated sigma is scaled by that
 SIGMA_CALIBRATION = 1.55
 GROW_PX = 1  # the centroid's weights: the blob grown by this (other ink excluded), as detection
+STRUCTURE_K = 3.0  # a window's spread above this x the frame's noise is structure, not noise
 MIN_WHITE = 10.0  # grey levels: a window whose white is darker is under-exposed (a blank or
 # black frame): its noise is clipped at black, so no dot can be told from it ('lost')
 
@@ -69,146 +78,408 @@ class WindowMeasure(NamedTuple):
     reason: np.ndarray  # (N,) object: '', 'edge', 'lost' or 'merged'
 
 
-def _dilate(mask: np.ndarray) -> np.ndarray:
-    """3x3 dilation of a stack of (m, h, w) masks (separable: rows, then columns)."""
-    out = mask.copy()
-    out[:, 1:] |= mask[:, :-1]
-    out[:, :-1] |= mask[:, 1:]
-    rows = out.copy()
-    out[:, :, 1:] |= rows[:, :, :-1]
-    out[:, :, :-1] |= rows[:, :, 1:]
-    return out
+_REASONS = np.array(["", "edge", "lost", "merged"], dtype=object)  # the kernel's reason codes
+_U = np.uint64  # unsigned indices: numba leaves out the wrap-around of negative indices, which
+# would keep the loops from running on whole vectors
 
 
-def _dist2(xs: np.ndarray, ys: np.ndarray, c: np.ndarray) -> np.ndarray:
-    """(m, h, w) squared distances of window pixels from (m, 2) window-relative centres."""
-    return (xs - c[:, 0, None, None]) ** 2 + (ys - c[:, 1, None, None]) ** 2
+@numba.njit(cache=True)
+def _largest(ring: np.ndarray, k: int) -> tuple[int, int]:
+    """The ``k``-th and ``k + 1``-th largest (from 0) grey levels counted in the histogram ``ring``."""
+    seen, first = 0, -1
+    for v in range(255, -1, -1):
+        seen += ring[v]
+        if first < 0 and seen > k:
+            first = v
+        if seen > k + 1:
+            return first, v
+    return max(first, 0), 0
 
 
-def _masked_median(values: np.ndarray, use: np.ndarray) -> np.ndarray:
-    """Median of each row of (m, p) ``values`` over its ``use`` entries (NaN where none)."""
-    srt = np.sort(np.where(use, values, np.inf), axis=1)
-    cnt = use.sum(axis=1)
-    rows = np.arange(len(values))
-    lo = srt[rows, np.maximum(cnt - 1, 0) // 2]
-    hi = srt[rows, np.minimum(cnt // 2, values.shape[1] - 1)]
-    return np.where(cnt > 0, (lo + hi) / 2, np.nan)
+@numba.njit(cache=True)
+def _lerp(a: float, b: float, gamma: float) -> float:
+    """numpy.percentile's linear interpolation (the same rounding)."""
+    return b - (b - a) * (1 - gamma) if gamma >= 0.5 else a + (b - a) * gamma
 
 
-def window_levels(patch: np.ndarray, annulus: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The white level and pixel noise of (m, h, w) windows. The white level is the mean of each
-    window's pixels between its ``WHITE_BAND`` percentiles (a plane fitted to the ``annulus``,
-    an (m, h, w) mask, fails in a dense grid, whose annulus is mostly the neighbours' edges); the
-    noise is the spread of the annulus's pixels above it, over ``ABOVE_WHITE_SPREAD``, at least
-    the quantisation noise. Returns ``(white (m,), noise (m,), sigma_white (m,))``: the white
-    level, the noise, and the white level's standard uncertainty."""
-    m = len(patch)
-    g = patch.reshape(m, -1)
-    ring = np.broadcast_to(annulus, patch.shape).reshape(m, -1)
-    lo, hi = np.percentile(g, WHITE_BAND, axis=1)  # a trimmed mean: no 8-bit steps
-    band = (g >= lo[:, None]) & (g <= hi[:, None])
-    white = (g * band).sum(axis=1) / np.maximum(band.sum(axis=1), 1)
-    above = ring & (g >= white[:, None])
-    noise = MAD_TO_SIGMA * _masked_median(g - white[:, None], above) / ABOVE_WHITE_SPREAD
-    noise = np.maximum(np.nan_to_num(noise), QUANTISATION_NOISE)
-    count = np.maximum(band.sum(axis=1), 3)
-    return white, noise, noise / np.sqrt(count)
+@numba.njit(cache=True)
+def _white_band(hist: np.ndarray, count: int) -> tuple[float, float]:
+    """numpy.percentile's (method 'linear') ``WHITE_BAND`` percentiles of the ``count`` >= 2 levels
+    of the window's histograms (:func:`_copy`), in one scan down from 255."""
+    at_lo, at_hi = (count - 1) * (WHITE_BAND[0] / 100.0), (count - 1) * (WHITE_BAND[1] / 100.0)
+    k_hi, k_lo = count - 2 - int(math.floor(at_hi)), count - 2 - int(math.floor(at_lo))  # from the top
+    seen, v_hi, v_hi1, v_lo = 0, -1, -1, -1
+    for v in range(255, -1, -1):
+        seen += hist[v] + hist[v + 256]
+        if v_hi < 0 and seen > k_hi:
+            v_hi = v
+        if v_hi1 < 0 and seen > k_hi + 1:
+            v_hi1 = v
+        if v_lo < 0 and seen > k_lo:
+            v_lo = v
+        if seen > k_lo + 1:  # the sorted levels' floor(at)-th is the (count - 1 - floor(at))-th from the top
+            return (_lerp(v, v_lo, at_lo - math.floor(at_lo)),
+                    _lerp(v_hi1, v_hi, at_hi - math.floor(at_hi)))  # fmt: skip
+    return 0.0, 0.0
 
 
-STRUCTURE_K = 3.0  # a window's spread above this x the frame's noise is structure, not noise
+@numba.njit(cache=True)
+def _copy(
+    g: np.ndarray, y0: int, x0: int, n: int, ring_r2: float, hist: np.ndarray, wins: np.ndarray, at: int
+) -> None:
+    """Copy the ``n`` x ``n`` window at (``x0``, ``y0``) of the frame ``g`` into ``wins`` from
+    ``at`` (padded: :func:`_geometry`; the padding 255) and count its levels in ``hist`` (768):
+    two interleaved histograms of the window (a run of one level does not wait on itself), then
+    the annulus's (pixels beyond ``ring_r2``, squared distance from the centre)."""
+    hist[:] = 0
+    h, stride = n // 2, _U(n + 2)
+    for q in range(stride * stride):
+        wins[at + q] = 255
+    for i in range(n):
+        y, row = _U(y0 + i), at + _U(i + 1) * stride + _U(1)
+        for j in range(_U(n)):
+            v = g[y, _U(x0) + j]
+            wins[row + j] = v
+            hist[_U(v) + ((j & _U(1)) << _U(8))] += 1
+        dy2 = (i - h) * (i - h)
+        inner = -1  # the annulus: the columns farther than this from the centre's
+        if dy2 <= ring_r2:
+            inner = int(math.sqrt(ring_r2 - dy2))
+            while (inner + 1) * (inner + 1) + dy2 <= ring_r2:
+                inner += 1
+            while inner >= 0 and inner * inner + dy2 > ring_r2:
+                inner -= 1
+        left, right = (h - inner, h + inner + 1) if inner >= 0 else (n, n)
+        for j in range(_U(left)):
+            hist[_U(512) + _U(wins[row + j])] += 1
+        for j in range(_U(right), _U(n)):
+            hist[_U(512) + _U(wins[row + j])] += 1
+
+
+@numba.njit(cache=True)
+def _levels(hist: np.ndarray, n: int) -> tuple[float, float, float]:
+    """The white level, noise (before it is held to the frame's) and the white level's
+    uncertainty (module docstring) of an ``n`` x ``n`` window from its histograms (:func:`_copy`):
+    exact percentiles and median."""
+    lo, hi = _white_band(hist, n * n)
+    total = band = 0
+    for v in range(int(math.ceil(lo)), int(math.floor(hi)) + 1):
+        total += v * (hist[v] + hist[v + 256])
+        band += hist[v] + hist[v + 256]
+    white = total / max(band, 1)
+    cnt = 0  # the annulus's levels >= white, and the median of (level - white) over them
+    for v in range(int(math.ceil(white)), 256):
+        cnt += hist[512 + v]
+    noise = 0.0
+    if cnt > 0:
+        hi_v, lo_v = _largest(hist[512:], cnt - 1 - cnt // 2)  # sorted: (cnt - 1) // 2-th, next
+        lo_v = lo_v if cnt % 2 == 0 else hi_v
+        noise = MAD_TO_SIGMA * (((lo_v - white) + (hi_v - white)) / 2) / ABOVE_WHITE_SPREAD
+    noise = max(noise, QUANTISATION_NOISE)
+    return white, noise, noise / math.sqrt(max(band, 3))
+
+
+@numba.njit(cache=True)
+def _last_darker(white: float, level: float) -> int:
+    """The largest grey level v (-1: none) with ``white - v > level``."""
+    v = min(max(int(math.floor(white - level)), -1), 255)
+    while v >= 0 and not white - v > level:
+        v -= 1
+    while v < 255 and white - (v + 1) > level:
+        v += 1
+    return v
+
+
+@numba.njit(cache=True)
+def _geometry(n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """An ``n`` x ``n`` window as a flat array padded by one pixel all round (row stride n + 2;
+    pixel (i, j) at (i + 1) (n + 2) + j + 1), so that a 3x3 dilation is an OR of shifts: each
+    entry's column and row offsets from the centre (float, far away in the padding; and int, 0
+    there) and whether it is a pixel of the window."""
+    stride, h = n + 2, n // 2
+    xy = np.full((2, stride * stride), 1e9)
+    off = np.zeros((2, stride * stride), np.int64)
+    real = np.zeros(stride * stride, np.uint8)
+    for i in range(n):
+        for j in range(n):
+            p = (i + 1) * stride + j + 1
+            xy[0, p], xy[1, p], off[0, p], off[1, p], real[p] = j - h, i - h, j - h, i - h, 1
+    return xy, off, real
+
+
+@numba.njit(cache=True)
+def _flat_rows(c: float, reach: float, stride: int) -> range:
+    """The entries of a padded window (:func:`_geometry`) in the rows within ``reach`` of row
+    offset ``c`` from the centre (and a row more either side)."""
+    h, size = (stride - 2) // 2, stride * stride
+    first = max(int(math.floor(c - reach)) + h, 0) * stride
+    return range(_U(first), _U(min((int(math.ceil(c + reach)) + h + 3) * stride, size)))
+
+
+# the masks of a window (rows of a (planes, entries) array; padded: :func:`_geometry`): ink,
+# ink beyond doubt, the disc, where the blob may grow (ink in the disc), the seeds, the blob,
+# its growth by one pixel and by GROW_PX (and a spare), the other ink and its 3x3 growth, and
+# the window's pixels
+_INK, _SURE, _DISC, _ROOM, _SEED, _BLOB, _NEAR, _GROWN, _OTHER, _FRINGE, _REAL = range(11)
+_PLANES = 11
+
+
+@numba.njit(cache=True)
+def _mean_shift(wins: np.ndarray, at: int, m: np.ndarray, xy: np.ndarray, off: np.ndarray, white: float,
+                cx: float, cy: float, core: float) -> tuple[float, float]:  # fmt: skip
+    """The contrast-weighted centre of the ink (mask ``_INK``) within ``core`` (squared distance)
+    of (cx, cy), re-centred ``MEAN_SHIFT_STEPS`` times (window-relative; it stays put where there
+    is none; a step that does not move it ends the re-centring: the next ones would not either).
+    The sums are of integers (exact): sum(w x) = W sum(x) - sum(v x)."""
+    ink, stride = m[_INK], int(round(math.sqrt(xy.shape[1])))
+    for _ in range(MEAN_SHIFT_STEPS):
+        cnt = sv = sx = svx = sy = svy = 0
+        for p in _flat_rows(cy, math.sqrt(core), stride):
+            dx, dy = xy[0, p] - cx, xy[1, p] - cy
+            take = np.int64(ink[p]) * np.int64(dx * dx + dy * dy <= core)
+            v, x, y = np.int64(wins[at + _U(p)]), off[0, p], off[1, p]
+            cnt, sv, sx, svx = cnt + take, sv + take * v, sx + take * x, svx + take * v * x
+            sy, svy = sy + take * y, svy + take * v * y
+        if cnt == 0:
+            break
+        s = cnt * white - sv
+        ux, uy = (white * sx - svx) / s, (white * sy - svy) / s
+        if ux == cx and uy == cy:
+            break
+        cx, cy = ux, uy
+    return cx, cy
+
+
+@numba.njit(cache=True)
+def _dilate(src: np.ndarray, dst: np.ndarray, within: np.ndarray, stride: int, first: int, last: int) -> None:
+    """Mask ``dst`` = the 3x3 dilation of mask ``src`` within the mask ``within`` (padded windows,
+    :func:`_geometry`) on rows ``first..last`` (of 1 .. n; the padding rows: 0)."""
+    s, one = _U(stride), _U(1)
+    for q in range(max(_U(first) * s, s + one), min(_U(last + 1) * s, s * s - s - one)):
+        dst[q] = (src[q - s - one] | src[q - s] | src[q - s + one] | src[q - one] | src[q] | src[q + one]
+                  | src[q + s - one] | src[q + s] | src[q + s + one]) & within[q]  # fmt: skip
+    for q in range(s + one):  # the first and last rows are padding
+        dst[q] = dst[s * s - one - q] = 0
+
+
+@numba.njit(cache=True)
+def _grow(m: np.ndarray, stride: int) -> tuple[int, int]:
+    """The blob (mask ``_BLOB``): the seeds dilated (3x3) within ``_ROOM`` until nothing changes
+    (the ink connected to them). Returns the first and last rows that may hold it: all."""
+    size, n = stride * stride, stride - 2
+    _dilate(m[_SEED], m[_BLOB], m[_ROOM], stride, 1, n)  # the seeds themselves need not be in the room
+    while True:
+        _dilate(m[_BLOB], m[_SEED], m[_ROOM], stride, 1, n)
+        if (m[_SEED, :size] == m[_BLOB, :size]).all():
+            return 1, n
+        m[_BLOB, :size] = m[_SEED, :size]
+
+
+@numba.njit(cache=True)
+def _grow_rows(m: np.ndarray, stride: int, rows: np.ndarray) -> tuple[int, int]:
+    """:func:`_grow` on the masks packed one row a word (``rows``: scratch, (3, n + 2) int64), for
+    windows of at most 63 columns: the same, faster; returns the blob's first and last rows."""
+    n = stride - 2
+    cur, nxt, room = rows[0], rows[1], rows[2]
+    cur[0] = cur[n + 1] = nxt[0] = nxt[n + 1] = room[0] = room[n + 1] = 0
+    for i in range(1, n + 1):
+        base, a, b = _U(i * stride + 1), 0, 0
+        for j in range(_U(n)):
+            a |= np.int64(m[_SEED, base + j]) << np.int64(j)
+            b |= np.int64(m[_ROOM, base + j]) << np.int64(j)
+        cur[i], room[i] = a, b
+    start, changed = True, True
+    while changed or start:  # the seeds themselves need not be in the room
+        changed = False
+        for i in range(1, n + 1):
+            v = cur[i - 1] | cur[i] | cur[i + 1]
+            nxt[i] = (v | (v << 1) | (v >> 1)) & room[i]
+            changed |= nxt[i] != cur[i]
+        cur, nxt, start = nxt, cur, False
+    blob, first, last = m[_BLOB], n + 1, 0
+    blob[: stride * stride] = 0
+    for i in range(1, n + 1):
+        if cur[i]:
+            base, w, first, last = _U(i * stride + 1), cur[i], min(first, i), i
+            for j in range(_U(n)):
+                blob[base + j] = (w >> np.int64(j)) & 1
+    return first, last
+
+
+@numba.njit(cache=True)
+def _masks(wins: np.ndarray, at: int, xy: np.ndarray, sure_level: int, cx: float, cy: float, rad: float,
+           m: np.ndarray, rows: np.ndarray) -> tuple[int, range]:  # fmt: skip
+    """The masks (rows of ``m``) of one window from its ink (``_INK``): ink beyond doubt (levels
+    <= ``sure_level``), the disc (``rad`` around (cx, cy)), the blob (the ink within sqrt(2) of
+    the centre grown through connected (8-neighbour) ink within the disc), its growth by one pixel
+    and by ``GROW_PX``, and the other ink's 3x3 growth (these three near the blob's rows only).
+    Returns the mask that holds the blob grown by ``GROW_PX``, and the entries of the rows it
+    can reach (and one more either side)."""
+    size = xy.shape[1]
+    stride = int(round(math.sqrt(size)))
+    ink, sure, disc, room, seed = m[_INK], m[_SURE], m[_DISC], m[_ROOM], m[_SEED]
+    r2 = rad * rad
+    for p in range(size):
+        sure[p] = wins[at + _U(p)] <= sure_level
+        dx, dy = xy[0, p] - cx, xy[1, p] - cy
+        d2 = dx * dx + dy * dy
+        disc[p] = d2 <= r2
+        room[p] = ink[p] & disc[p]
+        seed[p] = ink[p] & (d2 <= 2.0)
+    first, last = _grow_rows(m, stride, rows) if stride - 2 <= 63 else _grow(m, stride)
+    blob, other = m[_BLOB], m[_OTHER]
+    # each growth is right within GROW_PX + 1 rows of the blob's if worked out within 2 GROW_PX + 1
+    lo, hi = max(first - 2 * GROW_PX - 1, 1), min(last + 2 * GROW_PX + 1, stride - 2)
+    _dilate(blob, m[_NEAR], m[_REAL], stride, lo, hi)
+    grown, spare = _NEAR, _GROWN
+    for _ in range(GROW_PX - 1):
+        _dilate(m[grown], m[spare], m[_REAL], stride, lo, hi)
+        grown, spare = spare, grown
+    for p in range(size):
+        other[p] = ink[p] & ~blob[p]
+    _dilate(other, m[_FRINGE], m[_REAL], stride, lo, hi)
+    lo, hi = max(first - GROW_PX - 1, 1), min(last + GROW_PX + 1, stride - 2)
+    return grown, range(_U(lo * stride), _U((hi + 1) * stride) if lo <= hi else _U(lo * stride))
+
+
+@numba.njit(cache=True)
+def _blob_sums(wins: np.ndarray, at: int, off: np.ndarray, m: np.ndarray, grown: int, entries: range,
+               white: float) -> tuple:  # fmt: skip
+    """From the masks of :func:`_masks` (the blob grown by ``GROW_PX`` in mask ``grown``, within
+    ``entries``): whether the blob's 1-pixel growth meets ink beyond doubt outside the disc (it
+    runs on: merged), its pixel count, and over the weighted pixels (the grown blob less the other
+    ink's fringe): the summed contrast ``w = W - v`` (0 where v >= W), the contrast-weighted
+    centroid (window-relative), the pixel count and the sums of the pixels' offsets from the
+    centroid and of their squares per axis."""
+    near, sure, disc, blob, fringe = m[_NEAR], m[_SURE], m[_DISC], m[_BLOB], m[_FRINGE]
+    weighted = m[grown]
+    runs = area = cnt = sv = sx = svx = sy = svy = npx = ax = ax2 = ay = ay2 = 0
+    below = int(math.ceil(white)) - 1  # the levels with a positive contrast
+    for p in entries:
+        runs |= near[p] & sure[p] & ~disc[p]
+        area += blob[p]
+        use = np.int64(weighted[p] & ~fringe[p] & 1)
+        v = np.int64(wins[at + _U(p)])
+        pos, x, y = use * np.int64(v <= below), off[0, p], off[1, p]
+        npx, ax, ax2, ay, ay2 = npx + use, ax + use * x, ax2 + use * x * x, ay + use * y, ay2 + use * y * y
+        cnt, sv, sx, svx = cnt + pos, sv + pos * v, sx + pos * x, svx + pos * v * x
+        sy, svy = sy + pos * y, svy + pos * v * y
+    s = cnt * white - sv
+    safe = s if s > 0 else 1.0
+    cu, cv = (white * sx - svx) / safe, (white * sy - svy) / safe
+    # offsets from the centroid: sum(x - c) and sum((x - c)^2) from sums of x and x^2
+    du, du2 = ax - npx * cu, ax2 - 2 * cu * ax + npx * cu * cu
+    dv, dv2 = ay - npx * cv, ay2 - 2 * cv * ay + npx * cv * cv
+    return runs != 0, area, s, cu, cv, npx, du, du2, dv, dv2
+
+
+@numba.njit(cache=True)
+def _measure_one(wins: np.ndarray, at: int, xy: np.ndarray, off: np.ndarray, cx: float, cy: float, rad: float,
+                 white: float, noise: float, s_white: float, ink_fraction: float, disc_margin: float,
+                 m: np.ndarray, rows: np.ndarray) -> tuple:  # fmt: skip
+    """One target's blob in its (padded) window at ``wins[at:]`` from the prediction (cx, cy)
+    relative to the window centre (module docstring): ``(centroid u, v relative to the window
+    centre, area, mass, sigma_mass, sigma_px, reason code)``."""
+    level = max(INK_NOISE_K * noise, ink_fraction * white)
+    darkest, ink = _last_darker(white, level), m[_INK]
+    for p in range(xy.shape[1]):
+        ink[p] = wins[at + _U(p)] <= darkest
+    cx, cy = _mean_shift(wins, at, m, xy, off, white, cx, cy, (rad - disc_margin) ** 2)
+    sure = _last_darker(white, level + INK_NOISE_K * noise)  # ink beyond doubt
+    grown, entries = _masks(wins, at, xy, sure, cx, cy, rad, m, rows)
+    runs_on, area, s, cu, cv, npx, du, du2, dv, dv2 = _blob_sums(wins, at, off, m, grown, entries, white)
+    safe = s if s > 0 else 1.0
+    var_u = (noise**2 * du2 + s_white**2 * du**2) / safe**2
+    var_v = (noise**2 * dv2 + s_white**2 * dv**2) / safe**2
+    wl = max(white, MIN_WHITE)
+    m_norm = s / wl
+    var_m = npx * noise**2 / wl**2 + ((npx - m_norm) / wl) ** 2 * s_white**2
+    area = area if white >= MIN_WHITE else 0
+    code = 2 if area == 0 else (3 if runs_on else 0)
+    return cu, cv, area, m_norm, math.sqrt(var_m), SIGMA_CALIBRATION * math.sqrt((var_u + var_v) / 2), code
+
+
+@numba.njit(cache=True)
+def _windows(shape: tuple, uv: np.ndarray, rad: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Each target's window: half-width (the disc's radius rounded up, plus 2) and centre pixel
+    (the prediction rounded), and the reason code: 0 (to measure), 1 'edge' (the window leaves
+    the image; or a radius no window holds), 2 'lost' (no prediction or radius)."""
+    n = len(uv)
+    half, centre, code = np.zeros(n, np.int64), np.zeros((n, 2), np.int64), np.zeros(n, np.int64)
+    for t in range(n):
+        if not (np.isfinite(uv[t, 0]) and np.isfinite(uv[t, 1]) and np.isfinite(rad[t]) and rad[t] >= 0):
+            code[t] = 2
+            continue
+        if max(abs(uv[t, 0]), abs(uv[t, 1]), rad[t]) >= 2.0**40:  # beyond any image
+            code[t] = 1
+            continue
+        half[t] = int(math.ceil(rad[t])) + 2
+        x, y = int(np.rint(uv[t, 0])), int(np.rint(uv[t, 1]))
+        centre[t, 0], centre[t, 1] = x, y
+        if min(x, y) - half[t] < 0 or x + half[t] >= shape[1] or y + half[t] >= shape[0]:
+            code[t] = 1
+    return half, centre, code
+
+
+@numba.njit(cache=True)
+def _measure_all(g: np.ndarray, uv: np.ndarray, rad: np.ndarray, ink_fraction: float,
+                 disc_margin: float) -> tuple:  # fmt: skip
+    """:func:`measure_windows` (the reasons as codes: :data:`_REASONS`): the windows' levels
+    first (the frame's noise is their median), then the blobs."""
+    n = len(uv)
+    half, centre, code = _windows(g.shape, uv, rad)
+    sel = np.nonzero(code == 0)[0]
+    m = len(sel)
+    sizes = 2 * half[sel] + 1
+    start = np.zeros(m + 1, np.int64)
+    start[1:] = np.cumsum((sizes + 2) ** 2)
+    wins = np.empty(start[-1], np.uint8)  # each window's pixels, copied once (the frame is large)
+    hist = np.empty(768, np.int32)
+    white, noise, s_white = np.full(n, np.nan), np.full(n, np.nan), np.zeros(n)
+    for k, t in enumerate(sel):
+        y0, x0, ring_r2 = centre[t, 1] - half[t], centre[t, 0] - half[t], (rad[t] + ANNULUS_GAP_PX) ** 2
+        _copy(g, y0, x0, sizes[k], ring_r2, hist, wins, _U(start[k]))
+        white[t], noise[t], s_white[t] = _levels(hist, sizes[k])
+    out = np.full((n, 2), np.nan), np.zeros(n), np.zeros(n), np.zeros(n), np.full(n, np.nan)
+    if m == 0:
+        return out + (white, noise, code)
+    uv_out, area, mass, smass, spx = out
+    frame_noise = max(np.median(noise[sel]), QUANTISATION_NOISE)
+    # the codec flattens some windows' white (their spread reads below the noise) and the dark
+    # beyond an edge fills others' (far above it): each is held to the frame's noise
+    noise[sel] = np.minimum(np.maximum(noise[sel], frame_noise), STRUCTURE_K * frame_noise)
+    masks = np.zeros((_PLANES, (sizes.max() + 2) ** 2), np.uint8)
+    rows = np.zeros((3, sizes.max() + 2), np.int64)
+    xy, off, real = _geometry(0)
+    for k in np.argsort(sizes):  # by size: one geometry for each
+        t = sel[k]
+        if xy.shape[1] != (sizes[k] + 2) ** 2:
+            xy, off, real = _geometry(sizes[k])
+            masks[_REAL, : len(real)] = real
+        cx, cy = uv[t, 0] - centre[t, 0], uv[t, 1] - centre[t, 1]  # the prediction, window-relative
+        cu, cv, area[t], mass[t], smass[t], sigma, code[t] = _measure_one(
+            wins, _U(start[k]), xy, off, cx, cy, rad[t], white[t], noise[t], s_white[t], ink_fraction,
+            disc_margin, masks, rows)  # fmt: skip
+        if code[t] == 0:
+            uv_out[t, 0], uv_out[t, 1], spx[t] = cu + centre[t, 0], cv + centre[t, 1], sigma
+    return uv_out, area, mass, smass, spx, white, noise, code
 
 
 def measure_windows(
     gray: np.ndarray, uv_px: np.ndarray, radius_px: np.ndarray, ink_fraction: float, disc_margin_px: float
 ) -> WindowMeasure:
-    """The dark blobs nearest (N, 2) predicted pixel positions (NaN rows: 'lost').
+    """The dark blobs nearest (N, 2) predicted pixel positions (NaN rows: 'lost') in an 8-bit
+    (H, W) frame.
 
     ``radius_px`` (N,): the disc that holds a blob (its semi-major axis plus ``disc_margin_px``).
     See the module docstring for the rule; ``reason`` is 'edge' where the window leaves the image,
     'lost' where there is no ink at the centre, 'merged' where the blob runs on beyond its disc.
     """
-    g = np.asarray(gray)
-    H, W = g.shape
-    uv_px = np.asarray(uv_px, np.float64).reshape(-1, 2)
-    radius_px = np.asarray(radius_px, np.float64).reshape(-1)
-    n = len(uv_px)
-    out = np.full((n, 2), np.nan)
-    area, mass, smass, spx = np.zeros(n), np.zeros(n), np.zeros(n), np.full(n, np.nan)
-    white_all, noise_all = np.full(n, np.nan), np.full(n, np.nan)
-    reason = np.full(n, "", dtype=object)
-    finite = np.isfinite(uv_px).all(axis=1) & np.isfinite(radius_px)
-    reason[~finite] = "lost"
-    half = np.where(finite, np.ceil(np.nan_to_num(radius_px)).astype(np.int64) + 2, 0)
-    # the windows, grouped by size, and their levels first: the frame's noise is their median
-    groups = []
-    for h in np.unique(half[finite]):
-        sel = np.nonzero(finite & (half == h))[0]
-        cu = np.rint(uv_px[sel, 0]).astype(np.int64)
-        cv = np.rint(uv_px[sel, 1]).astype(np.int64)
-        inside = (cu - h >= 0) & (cv - h >= 0) & (cu + h < W) & (cv + h < H)
-        reason[sel[~inside]] = "edge"
-        sel, cu, cv = sel[inside], cu[inside], cv[inside]
-        if len(sel) == 0:
-            continue
-        off = np.arange(-h, h + 1)
-        patch = g[(cv[:, None, None] + off[None, :, None]), (cu[:, None, None] + off[None, None, :])]
-        patch = patch.astype(np.float64)
-        xs = off[None, None, :].astype(np.float64)
-        ys = off[None, :, None].astype(np.float64)
-        annulus = xs**2 + ys**2 > ((radius_px[sel] + ANNULUS_GAP_PX) ** 2)[:, None, None]
-        groups.append((sel, cu, cv, patch, xs, ys, *window_levels(patch, annulus)))
-    if not groups:
-        return WindowMeasure(out, area, mass, smass, spx, white_all, noise_all, reason)
-    frame_noise = max(float(np.median(np.concatenate([grp[7] for grp in groups]))), QUANTISATION_NOISE)
-    for sel, cu, cv, patch, xs, ys, white, noise, s_white in groups:
-        rad = radius_px[sel]
-        # the codec flattens some windows' white (their spread reads below the noise) and the
-        # dark beyond an edge fills others' (far above it): each is held to the frame's noise
-        noise = np.clip(noise, frame_noise, STRUCTURE_K * frame_noise)
-        contrast = white[:, None, None] - patch
-        level = np.maximum(INK_NOISE_K * noise, ink_fraction * white)[:, None, None]
-        ink = contrast > level
-        sure = contrast > level + INK_NOISE_K * noise[:, None, None]  # ink beyond the noise
-        wts = np.clip(contrast, 0, None)
-        c = uv_px[sel] - np.c_[cu, cv]  # prediction relative to the window centre
-
-        core = (rad - disc_margin_px)[:, None, None] ** 2
-        for _ in range(MEAN_SHIFT_STEPS):  # ink within the blob's own size of the estimate
-            w = wts * (ink & (_dist2(xs, ys, c) <= core))
-            s = w.sum(axis=(1, 2))
-            ok = s > 0
-            c = np.where(ok[:, None], np.c_[(w * xs).sum(axis=(1, 2)), (w * ys).sum(axis=(1, 2))]
-                         / np.where(ok, s, 1)[:, None], c)  # fmt: skip
-        disc = _dist2(xs, ys, c) <= (rad**2)[:, None, None]
-        blob = ink & (_dist2(xs, ys, c) <= 2.0)  # the ink at the centre ...
-        for _ in range(int(h) + 1):  # ... grown through connected ink within the disc
-            blob = _dilate(blob) & ink & disc
-        grown = _dilate(blob)
-        # beyond the disc only ink beyond doubt shows a merge (not noise at the blurred edge)
-        runs_on = (grown & sure & ~disc).any(axis=(1, 2))
-        for _ in range(GROW_PX - 1):
-            grown = _dilate(grown)
-        grown &= ~_dilate(ink & ~blob)  # other ink and its fringe
-        w = wts * grown
-        s = w.sum(axis=(1, 2))
-        npx = np.where(white >= MIN_WHITE, blob.sum(axis=(1, 2)), 0)
-        r = np.where(npx == 0, "lost", np.where(runs_on, "merged", ""))
-        reason[sel] = r
-        keep = r == ""
-        safe = np.where(s > 0, s, 1.0)
-        cen = np.c_[(w * xs).sum(axis=(1, 2)), (w * ys).sum(axis=(1, 2))] / safe[:, None]
-        dx = np.where(grown, xs - cen[:, 0, None, None], 0.0)
-        dy = np.where(grown, ys - cen[:, 1, None, None], 0.0)
-        var_u = (noise**2 * (dx**2).sum(axis=(1, 2)) + s_white**2 * dx.sum(axis=(1, 2)) ** 2) / safe**2
-        var_v = (noise**2 * (dy**2).sum(axis=(1, 2)) + s_white**2 * dy.sum(axis=(1, 2)) ** 2) / safe**2
-        n_px = grown.sum(axis=(1, 2))
-        wl = np.maximum(white, MIN_WHITE)
-        m_norm = s / wl
-        var_m = n_px * noise**2 / wl**2 + ((n_px - m_norm) / wl) ** 2 * s_white**2
-        out[sel[keep]] = cen[keep] + np.c_[cu, cv][keep]
-        area[sel] = npx
-        mass[sel] = m_norm
-        smass[sel] = np.sqrt(var_m)
-        spx[sel] = np.where(keep, SIGMA_CALIBRATION * np.sqrt((var_u + var_v) / 2), np.nan)
-        white_all[sel], noise_all[sel] = white, noise
-    return WindowMeasure(out, area, mass, smass, spx, white_all, noise_all, reason)
+    g = np.asarray(gray).view()
+    if g.dtype != np.uint8 or g.ndim != 2:
+        raise TypeError(f"measure_windows: an 8-bit (H, W) frame expected, got {g.dtype} {g.shape}")
+    g.flags.writeable = False  # as decoded frames are: one compiled kernel for both
+    uv = np.ascontiguousarray(uv_px, np.float64).reshape(-1, 2)
+    rad = np.ascontiguousarray(radius_px, np.float64).reshape(-1)
+    *values, code = _measure_all(g, uv, rad, float(ink_fraction), float(disc_margin_px))
+    return WindowMeasure(*values, _REASONS[code])
