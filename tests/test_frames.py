@@ -16,6 +16,7 @@ from triaxtrack.frames import (
     count_test_frames,
     frame_map,
     iter_test_frames,
+    keyframe_test_frames,
     read_camera_timing,
     read_test_frame,
     summarize_frame_map,
@@ -29,7 +30,7 @@ from triaxtrack.simulate import (
     simulate_test,
 )
 from triaxtrack.tables import FRAME_MAP, OBSERVATIONS, read_table, write_table
-from triaxtrack.video import probe_video
+from triaxtrack.video import VideoWriter, keyframe_indices, probe_video
 
 ROOT = Path(__file__).resolve().parents[1]
 FPS = 10.0
@@ -222,3 +223,21 @@ def test_test_frames_counted_from_test_yaml_or_a_video(late_test, tmp_path):
     assert count_test_frames(path, late_test / "videos" / "cam02.mp4") == 3
     with pytest.raises(ValueError, match=r"test\.yaml: no `frames`"):
         count_test_frames(path)
+
+
+def test_keyframes_as_test_frames_through_the_frame_map(tmp_path):
+    """A video with a keyframe every 5 frames, recorded from test frame 2 on with video frame 6
+    dropped: its keyframes 0, 5, 10, 15 are test frames 2, 7, 13, 18; only the asked range is read."""
+    path = tmp_path / "gop.mp4"
+    with VideoWriter(path, 64, 48, FPS, gop=5) as w:
+        for k in range(20):  # a dark square drifting slowly: no scene cut, keyframes by the GOP only
+            img = np.full((48, 64), 200, np.uint8)
+            img[20:28, 10 + k : 18 + k] = 40
+            w.write(img)
+    assert keyframe_indices(path).tolist() == [0, 5, 10, 15]
+    assert keyframe_indices(path, 6, 15).tolist() == [10]
+    fmap = frame_map(CameraTiming("cam01", FPS, start_offset_s=0.2, dropped_frames=(8,)), 22, 20)
+    shown = fmap.set_index("frame")["video_index"]
+    assert [int(shown[k]) for k in (2, 7, 13, 18)] == [0, 5, 10, 15]
+    assert keyframe_test_frames(path, fmap, 0, 22).tolist() == [2, 7, 13, 18]
+    assert keyframe_test_frames(path, fmap, 8, 14).tolist() == [13]

@@ -56,12 +56,9 @@ FIELD_COLUMNS = ("u0_px", "u_per_u", "u_per_v", "v0_px", "v_per_u", "v_per_v")
 LAG_COLUMNS = ("keyframe", "side", "lag_frames", "sigma_frames", *FIELD_COLUMNS, "dots", "speed_px")
 
 
-def _quadratic_weights(t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Weights giving, from values at times ``t``, the least-squares quadratic's value and
-    slope at time 0: ``(w_value (n,), w_slope (n,))``."""
-    A = np.c_[np.ones_like(t), t, t * t]
-    pinv = np.linalg.pinv(A)  # (3, n)
-    return pinv[0], pinv[1]
+def _quadratic_value_weights(t: np.ndarray) -> np.ndarray:
+    """Weights giving, from values at times ``t``, the least-squares quadratic's value at time 0."""
+    return np.linalg.pinv(np.c_[np.ones_like(t), t, t * t])[0]
 
 
 def _side_frames(frames: np.ndarray, keys: np.ndarray, k: int, side: int) -> np.ndarray:
@@ -97,7 +94,7 @@ def _side_fit(uv: np.ndarray, frames: np.ndarray, keys: np.ndarray, k: int, side
     if len(near) < MIN_SIDE_FRAMES or len(far) < MIN_FAR_FRAMES:
         return None
     at_k = uv[np.searchsorted(frames, k)]
-    w_val = _quadratic_weights((near - k).astype(np.float64))[0]
+    w_val = _quadratic_value_weights((near - k).astype(np.float64))
     tf = (far - far.mean()).astype(np.float64)
     w_slope = tf / (tf * tf).sum()
     p = uv[np.searchsorted(frames, near)]  # (n, N, 2)
@@ -189,19 +186,22 @@ def lag_per_frame(frames: np.ndarray, keyframes: np.ndarray, lags: pd.DataFrame)
 
 
 def _velocity(frames: np.ndarray, uv: np.ndarray) -> np.ndarray:
-    """Each dot's velocity (pixels per frame) at each frame from its own centroids: the
-    derivative of the piecewise-linear path through them (central where both neighbours are
-    reported, one-sided at the ends), NaN where it has no reported neighbour."""
-    t = frames.astype(np.float64)
-    vel = np.full_like(uv, np.nan)
-    for j in range(uv.shape[1]):
-        for c in range(2):
-            x = uv[:, j, c]
-            ok = np.isfinite(x)
-            if ok.sum() >= 2:
-                filled = np.interp(t, t[ok], x[ok], left=np.nan, right=np.nan)
-                vel[:, j, c] = np.gradient(filled, t) if len(t) > 1 else np.nan
-    return vel
+    """Each dot's velocity (pixels per frame) at each frame: the derivative of a least-squares
+    quadratic in time through all its reported centroids of the chunk (NaN with fewer than 3).
+    Smooth on purpose: the correction multiplies it by the lag, which on nearly static dots can
+    be several frames, so a frame-to-frame difference would add its noise to every centroid."""
+    t = (frames - frames.mean()).astype(np.float64)
+    A = np.c_[np.ones_like(t), t, t * t]  # (F, 3)
+    ok = np.isfinite(uv).all(axis=2)  # (F, N)
+    w = ok.astype(np.float64)
+    y = np.nan_to_num(uv)  # (F, N, 2)
+    normal = np.einsum("fn,fi,fj->nij", w, A, A)  # (N, 3, 3)
+    rhs = np.einsum("fn,fi,fnd->nid", w, A, y)  # (N, 3, 2)
+    fit = ok.sum(axis=0) >= 3
+    coef = np.full((uv.shape[1], 3, 2), np.nan)
+    if fit.any():
+        coef[fit] = np.linalg.solve(normal[fit], rhs[fit])
+    return coef[None, :, 1, :] + 2 * coef[None, :, 2, :] * t[:, None, None]
 
 
 def correct_lag(tracks: pd.DataFrame, keyframes: np.ndarray, lags: pd.DataFrame) -> pd.DataFrame:
@@ -229,14 +229,6 @@ def correct_lag(tracks: pd.DataFrame, keyframes: np.ndarray, lags: pd.DataFrame)
     out.loc[rep, "u_px"] = out.loc[rep, "u_px"].to_numpy() + s[:, 0]
     out.loc[rep, "v_px"] = out.loc[rep, "v_px"].to_numpy() + s[:, 1]
     return out
-
-
-def keyframe_test_frames(fmap: pd.DataFrame, video_keyframes: np.ndarray) -> np.ndarray:
-    """The test frames (sorted) whose picture is one of the video's keyframes
-    (:func:`triaxtrack.video.keyframe_indices`), through the camera's ``FRAME_MAP``."""
-    rec = fmap[~fmap["missing"].astype(bool)]
-    hit = rec["video_index"].isin(np.asarray(video_keyframes, np.int64))
-    return np.sort(rec.loc[hit, "frame"].to_numpy(np.int64))
 
 
 def lag_corrected(tracks: pd.DataFrame, keyframes: np.ndarray) -> tuple[pd.DataFrame, pd.DataFrame]:

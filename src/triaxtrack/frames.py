@@ -40,7 +40,7 @@ import pandas as pd
 import yaml
 
 from triaxtrack.tables import FRAME_MAP, conform
-from triaxtrack.video import iter_frames, probe_video
+from triaxtrack.video import iter_frames, keyframe_indices, probe_video
 
 SUBFRAME_TOL_FRAMES = 0.05  # |start_offset_s * fps - m| above this: the camera is off the test frames
 REASONS = ("before_start", "dropped", "after_end")
@@ -218,3 +218,15 @@ def read_test_frame(video_path: str | Path, fmap: pd.DataFrame, frame: int) -> n
     for _, image in iter_test_frames(video_path, fmap, frame, frame + 1):
         return image
     raise ValueError(f"{video_path}: test frame {frame} not read")  # unreachable: one row exists
+
+
+def keyframe_test_frames(video_path: str | Path, fmap: pd.DataFrame, start: int, stop: int) -> np.ndarray:
+    """The test frames ``start <= k < stop`` (sorted) whose picture is one of the video's
+    keyframes (:func:`triaxtrack.video.keyframe_indices`, demuxing only that part of the video)."""
+    rows = _rows(fmap, range(start, stop))
+    rec = rows[~rows["missing"].astype(bool)]
+    if rec.empty:
+        return np.zeros(0, np.int64)
+    video = rec["video_index"].astype(np.int64)
+    keys = keyframe_indices(video_path, int(video.min()), int(video.max()) + 1)
+    return np.sort(rec.index[video.isin(keys)].to_numpy(np.int64))

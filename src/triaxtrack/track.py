@@ -58,7 +58,6 @@ test frames (``triaxtrack.frames``).
 
 from __future__ import annotations
 
-import math
 from collections.abc import Collection, Iterable
 from dataclasses import dataclass, fields
 
@@ -274,40 +273,6 @@ def _solve3(a: np.ndarray, rhs: np.ndarray) -> None:
             rhs[r, k] /= a[r, r]
 
 
-@numba.njit(cache=True)
-def _nearest_within(uv: np.ndarray, reach: np.ndarray) -> np.ndarray:
-    """For each of the points ``uv`` (n, 2): the nearest other one closer than ``reach[i]`` (index,
-    -1 where none), sought in its own and the neighbouring bands of v as wide as the largest
-    reach, each band sorted by u."""
-    n = len(uv)
-    out = np.full(n, -1, np.int64)
-    lo_v, span_v = uv[:, 1].min(), uv[:, 1].max() - uv[:, 1].min()
-    width = max(reach.max(), span_v / n, 1e-9)
-    width = width if np.isfinite(width) else span_v + 1.0
-    band = np.floor((uv[:, 1] - lo_v) / width).astype(np.int64)  # at most n + 1 bands
-    order = np.argsort(band * (uv[:, 0].max() - uv[:, 0].min() + 1.0) + uv[:, 0] - uv[:, 0].min())
-    u = uv[order, 0]
-    start = np.full(band.max() + 4, n)  # band b's points: order[start[b + 1]:start[b + 2]]
-    start[:2] = 0
-    start[2:-1] = np.cumsum(np.bincount(band))
-    for i in range(n):
-        best = reach[i]
-        for b in range(band[i] - 1, band[i] + 2):
-            lo, end = start[b + 1], start[b + 2]
-            hi = end
-            while lo < hi:  # the band's first point with u >= u_i - best
-                mid = (lo + hi) // 2
-                lo, hi = (mid + 1, hi) if u[mid] < uv[i, 0] - best else (lo, mid)
-            for a in range(lo, end):
-                if u[a] > uv[i, 0] + best:
-                    break
-                j = order[a]
-                d = math.sqrt((uv[j, 0] - uv[i, 0]) ** 2 + (uv[j, 1] - uv[i, 1]) ** 2)
-                if j != i and d < best:
-                    best, out[i] = d, j
-    return out
-
-
 def _vouchers(state: _State, vouch: np.ndarray, which: np.ndarray) -> np.ndarray:
     """(n, NEIGHBOURS) neighbours of the targets ``which`` among the vouching ones of their kind,
     within ``FAR_NEIGHBOURS`` times their spacing (index n: none); other rows empty."""
@@ -377,11 +342,11 @@ def _step(state: _State, gray: np.ndarray | None, cfg: TrackingConfig, first: bo
     jump = measured & (np.linalg.norm(uv - pred, axis=1) > cfg.gate * state.spacing)
     reason[jump & (reason == "")] = "jump"
     cand = np.nonzero(reason == "")[0]
-    if len(cand) > 1:  # two targets on one blob (the nearest other one too close): both dropped
-        nearest = _nearest_within(uv[cand], cfg.min_separation * state.spacing[cand])
-        close = nearest >= 0
+    if len(cand) > 1:  # two targets on one blob: both dropped
+        d, nearest = cKDTree(uv[cand]).query(uv[cand], k=2)
+        close = d[:, 1] < cfg.min_separation * state.spacing[cand]
         reason[cand[close]] = "ambiguous"
-        reason[cand[nearest[close]]] = "ambiguous"
+        reason[cand[nearest[close, 1]]] = "ambiguous"
     # The flow check. Only targets reported in the previous frame (or before a blank one, see
     # below) vouch for their neighbours at first: targets found again must not confirm
     # one another (a whole region can lock one dot over at once); each one that passes then

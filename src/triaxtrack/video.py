@@ -612,10 +612,11 @@ def concat_videos(segments: Sequence[PathLike], out_path: PathLike) -> int:
     return n_packets
 
 
-def keyframe_indices(path: PathLike) -> np.ndarray:
-    """Frame indices (sorted, int64) of the keyframes (intra-coded frames) of ``path``'s first
-    video stream, from its packets (demuxed, not decoded). ValueError naming the file if it
-    cannot be read."""
+def keyframe_indices(path: PathLike, start: int = 0, stop: int | None = None) -> np.ndarray:
+    """Frame indices (sorted, int64) of the keyframes (intra-coded frames) among frames
+    ``start <= k < stop`` of ``path``'s first video stream, from its packets (demuxed, not
+    decoded; from the keyframe at or before ``start``, so a chunk reads only its own part of a
+    long video). ValueError naming the file if it cannot be read."""
     p = Path(path)
     keys = []
     with _open_input(p) as container:
@@ -623,13 +624,17 @@ def keyframe_indices(path: PathLike) -> np.ndarray:
         fps = _stream_fps(stream, p)
         tb = Fraction(stream.time_base)
         t0 = int(stream.start_time or 0)
-        k = -1
         try:
+            if start > 0:
+                container.seek(t0 + int(Fraction(start) / fps / tb), stream=stream, backward=True)
+            k = -1
             for packet in container.demux(stream):
                 if packet.size == 0:
                     continue  # the demuxer's end-of-stream flush packet
                 k = k + 1 if packet.pts is None else _frame_index(packet.pts, t0, tb, fps)
-                if packet.is_keyframe:
+                if stop is not None and k >= stop:
+                    break
+                if packet.is_keyframe and k >= start:
                     keys.append(k)
         except av.FFmpegError as exc:
             raise ValueError(f"cannot read video {p}: {exc}") from exc

@@ -2,13 +2,12 @@
 
 import yaml
 
-from triaxtrack.codec_lag import keyframe_test_frames, lag_corrected
-from triaxtrack.frames import iter_test_frames
+from triaxtrack.codec_lag import lag_corrected
+from triaxtrack.frames import iter_test_frames, keyframe_test_frames
 from triaxtrack.logs import log_to
 from triaxtrack.tables import FRAME_MAP, LABELS, TRACKS, read_table, write_table
 from triaxtrack.timesteps import tracking_summary
 from triaxtrack.track import TrackingConfig, chunk_frames, track_frames
-from triaxtrack.video import keyframe_indices
 
 log_to(snakemake.log[0])
 
@@ -21,10 +20,9 @@ plan = chunk_frames(labels, fmap, fps, snakemake.params.chunk, cfg, snakemake.in
 frames = iter_test_frames(snakemake.input.video, fmap, plan.first, plan.end)
 tracks = track_frames(frames, labels, camera, plan.report, cfg)
 if snakemake.params.tracking["codec_lag"]:
-    keys = keyframe_test_frames(fmap, keyframe_indices(snakemake.input.video))
+    keys = keyframe_test_frames(snakemake.input.video, fmap, plan.first, plan.end)
     tracks, lags = lag_corrected(tracks, keys)
-    inside = keys[(keys >= plan.first) & (keys < plan.end)].tolist()
-    print(f"{camera}: P frames against keyframes {inside} (triaxtrack.codec_lag):")
+    print(f"{camera}: P frames against keyframes {keys.tolist()} (triaxtrack.codec_lag):")
     print(lags.to_string(index=False) if len(lags) else "  not measured (no keyframe with enough P frames)")
 shared = tracks["frame"] == plan.handover
 write_table(tracks[~shared], snakemake.output.tracks, TRACKS)

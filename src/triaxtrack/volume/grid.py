@@ -63,7 +63,7 @@ def _membrane_layout(table: pd.DataFrame) -> tuple[pd.DataFrame, np.ndarray, np.
     return mem, z_of_row, th_of_col
 
 
-def _kasa_circle(xy: np.ndarray) -> tuple[np.ndarray, float]:
+def kasa_circle(xy: np.ndarray) -> tuple[np.ndarray, float]:
     """Algebraic least-squares circle through (n, 2) points: centre (2,) and radius, mm."""
     a = np.c_[2 * xy, np.ones(len(xy))]
     b = (xy**2).sum(axis=1)
@@ -237,14 +237,14 @@ def fill_grid(
     for k in range(n_r):
         m = measured[k]
         if m.mean() >= CENTRE_MIN_SHARE:
-            centre[below + k] = _kasa_circle(xyz[k, m, :2])[0]
+            centre[below + k] = kasa_circle(xyz[k, m, :2])[0]
     if rings:  # the pedestal centre below, the top face centre above
         centre[0] = centres[0]
         if len(rings) == 2:
             centre[-1] = centres[1]
     ok = np.isfinite(centre[:, 0])
     if not ok.any():
-        centre[:] = _kasa_circle(xyz[measured][:, :2])[0] if measured.sum() >= 3 else 0.0
+        centre[:] = kasa_circle(xyz[measured][:, :2])[0] if measured.sum() >= 3 else 0.0
     else:
         for d in range(2):
             centre[:, d] = np.interp(z_nodes, z_nodes[ok], centre[ok, d])

@@ -23,7 +23,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from triaxtrack.volume.grid import _kasa_circle
+from triaxtrack.volume.grid import kasa_circle
 
 LOCAL_ZONE = (1 / 3, 2 / 3)  # the gauge zone: this share of the reference height, from the bottom face
 MIN_LOCAL_DOTS = 20  # fewer dots in the zone in both frames: no local strain (NaN)
@@ -65,8 +65,8 @@ def local_strains(points: pd.DataFrame, reference: pd.DataFrame, height0_mm: flo
     b, sb = _slope(both["z_mm_0"].to_numpy(), both["z_mm"].to_numpy(), through_origin=False)
     xy0 = both[["x_mm_0", "y_mm_0"]].to_numpy()
     xy = both[["x_mm", "y_mm"]].to_numpy()
-    r0 = np.linalg.norm(xy0 - _kasa_circle(xy0)[0], axis=1)
-    r = np.linalg.norm(xy - _kasa_circle(xy)[0], axis=1)
+    r0 = np.linalg.norm(xy0 - kasa_circle(xy0)[0], axis=1)
+    r = np.linalg.norm(xy - kasa_circle(xy)[0], axis=1)
     c, sc = _slope(r0, r, through_origin=True)
     return {
         "local_axial_strain": 1 - b, "local_axial_sigma": sb,
