@@ -43,6 +43,11 @@ class SimulationConfig:
     occluder_z_mm: tuple[float, float] | None = None  # (z0, z1): a dark band hides the membrane there
     calibration_images: int = 20  # board images per camera (test-folder.md: 10-20); 40 % across image corners
     min_view_cos: float = 0.3
+    # the recorder's keyframe interval (a GOP), seconds: a keyframe every round(gop_s x fps)
+    # frames counted from the first, whatever the chunk size (issue 17)
+    gop_s: float = 2.0
+    # the simulated load-frame log's settings (triaxtrack.simulate.loadlog; issue 18)
+    load_frame: dict = field(default_factory=dict)
     # per camera (by name): test-clock time of its first frame, a whole number of frames >= 0
     # (the camera started late), and the nominal frame numbers it dropped (triaxtrack.frames)
     start_offset_s: dict[str, float] = field(default_factory=dict)
