@@ -35,6 +35,7 @@ from triaxtrack.identify import (
 from triaxtrack.identify.anchors import MAX_PITCH_CHANGE, _anchor_offsets, _MembraneView
 from triaxtrack.identify.cell import _row_pitch_px, _straight_chains
 from triaxtrack.identify.coded import _ct_stripes, _plausible_cts
+from triaxtrack.identify.state import UNLABELLED
 from triaxtrack.kit import coded_target_polygons, ct_codes, load_kit_design, target_table
 from triaxtrack.optics import read_cameras
 from triaxtrack.raster import paint
@@ -494,3 +495,47 @@ def test_a_merged_pair_between_labelled_column_neighbours_is_labelled():
     assert f.ids[1] == -1 and str(u + 64) in f.reason[1]
     f, rows = split([u, -1, -1])
     assert rows.empty and f.reason[1] == "not reached"
+
+
+def test_a_stripe_end_is_not_anchored_far_from_a_borrowed_scale(kit):
+    """A longitudinal stripe whose two CTs are not decoded is anchored from its neighbours'
+    direction down the cell, whose scale is another distance's (here 9 % larger). From the top
+    CT's Eq. 1 dot (7 mm to the stripe's top) that is safe; from the bottom one (22 mm) the
+    prediction lands on the last-but-one dot when the last is hidden: it is not used, and every
+    dot labelled has its own ID."""
+    from triaxtrack.identify.cell import _label_longitudinal
+    from triaxtrack.kit import eq1_dot_id
+
+    design = kit[0]
+    cell = design["cell_targets"]
+    ls = cell["longitudinal_stripes"][1]
+    top, bottom = cell["ct_stripes"][0], cell["ct_stripes"][-1]
+    n, zt, zb = ls["count"], cell["longitudinal_z_top"], cell["longitudinal_z_bottom"]
+    spacing = (zt - zb) / (n - 1)
+    s = 7.0  # px per mm down the cell
+
+    def px(z, u=400.0):
+        return np.array([u, 100.0 + s * (zt + 20.0 - z)])
+
+    ct_top = ls["ct"]
+    ct_bottom = ct_top - top["first_id"] + bottom["first_id"]
+    rows = [(eq1_dot_id(ct_top, design), px(top["z"] - cell["dot_offset"]))]
+    rows += [(eq1_dot_id(ct_bottom, design), px(bottom["z"] - cell["dot_offset"]))]
+    rows += [(-(k + 10), px(zt - k * spacing)) for k in range(n - 1)]  # the stripe, last dot hidden
+    # the neighbour CTs (decoded) one place round, their Eq. 1 dots 9 mm below at 1.09 x the scale
+    centres = {}
+    for ct, z in ((ct_top + 1, top["z"]), (ct_bottom + 1, bottom["z"])):
+        centres[ct] = (px(z, 460.0), None)
+        rows.append((eq1_dot_id(ct, design), px(z, 460.0) + [0.0, 1.09 * s * cell["dot_offset"]]))
+    pos = np.array([p for _, p in rows])
+    ids = np.array([t if t > 0 else UNLABELLED for t, _ in rows], np.int64)
+    blobs = pd.DataFrame({"area_px": 20.0, "background": 200.0, "roundness": 0.5}, index=range(len(pos)))
+    empty = np.full(len(pos), "", object)
+    f = _Frame(blobs, pos, ids.copy(), empty.copy(), np.zeros(len(pos)), empty.copy())
+    pool = _Pool(pos, ids == UNLABELLED, blobs)
+    _label_longitudinal(f, pool, centres, design, IdentifyParams())
+    stripe = np.array([t for t, _ in rows]) < 0
+    truth = ls["first_id"] + (-np.array([t for t, _ in rows])[stripe] - 10)
+    got = f.ids[stripe]
+    assert (got == truth).sum() >= n // 2  # grown down from the top anchor
+    assert ((got == truth) | (got == UNLABELLED)).all()
