@@ -53,6 +53,7 @@ if __name__ == "__main__":
     w = scores.pivot_table(index="item", columns="metric", values="value")
     print(w.round(3).to_string())
     print(
-        f"{test.name}: coverage min {w.coverage.min():.3f} median {w.coverage.median():.3f} | "
+        f"{test.name}: coverage min {w.coverage.min():.3f} median {w.coverage.median():.3f} "
+        f"(within 60 deg: min {w.coverage_frontal.min():.3f}) | "
         f"wrong {int(w.wrong_ids.sum())} | cell p95 worst {w.filter(like='p95').max().max():.3f}"
     )

@@ -174,3 +174,25 @@ def test_every_metric_is_documented_in_the_help_and_the_config_readme():
     readme = (Path(__file__).resolve().parents[1] / "config" / "README.md").read_text()
     assert [n for n in sorted(names) if n not in SCORE_HELP] == []
     assert [n for n in sorted(names) if f"`{n}`" not in readme] == []
+
+
+def test_view_angle_of_targets_round_the_cylinder():
+    """A camera 340 mm out on the x axis sees a target on the x axis face-on, one 60 degrees
+    round at about 65 degrees (the line of sight from a near camera leans further off its normal
+    than from infinity), one on the y axis nearly edge-on; an unknown target is NaN."""
+    import numpy as np
+    import pandas as pd
+
+    from triaxtrack.optics import Camera
+    from triaxtrack.score import _view_cos
+
+    R = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, -1.0], [-1.0, 0.0, 0.0]])  # looks along -x
+    cam = Camera.from_json("c", {"K": np.eye(3).tolist(), "dist": [0.0] * 5, "width": 10, "height": 10,
+                                 "R": R.tolist(), "t": (-R @ np.array([340.0, 0, 70])).tolist()})  # fmt: skip
+    a = np.radians(60)
+    pts = pd.DataFrame({"frame": 0, "id": [1, 2, 3], "x_mm": [35.0, 35 * np.cos(a), 0.0],
+                        "y_mm": [0.0, 35 * np.sin(a), 35.0], "z_mm": 70.0})  # fmt: skip
+    cos = _view_cos(cam, np.array([1, 2, 3, 9]), 0, pts)
+    assert cos[0] == pytest.approx(1.0)
+    assert cos[1] == pytest.approx(np.cos(a + np.arctan2(35 * np.sin(a), 340 - 35 * np.cos(a))), abs=1e-9)
+    assert 0.4 < cos[1] < 0.5 and abs(cos[2]) < 0.11 and np.isnan(cos[3])

@@ -24,6 +24,7 @@ calibration/<camera>.json, cameras.json
 labels.parquet (per camera@frame)
   wrong_ids: labels farther than wrong_id_px from their target's exact projection;
   coverage: share of the targets the truth says the camera sees that are labelled;
+  coverage_frontal (reported): the same among those facing the camera within 60 degrees;
   cell_centroid_median, cell_centroid_p95: centroid errors of the cell-wall dots (px)
 quality.json
   mean_reprojection (px), all cameras and each
