@@ -208,7 +208,7 @@ def test_fast_motion_drops_dots_rather_than_swapping(monkeypatch, speed):
         return ids, uv0 + (slow(frame)[1] - uv0) * speed
 
     monkeypatch.setattr(here, "truth_positions", fast)
-    monkeypatch.setattr(here, "bar_columns", lambda frame: (-100.0, -90.0))  # no bar
+    monkeypatch.setattr(here, "bar_columns", lambda frame: (W + 10.0, W + 20.0))  # no bar (off the image)
     tracks = track_frames(((k, render(k)) for k in range(FRAMES)), first_labels(), "cam01", range(FRAMES))
     rep = tracks[tracks["reason"] == ""]
     for k, g in rep.groupby("frame"):
@@ -216,6 +216,34 @@ def test_fast_motion_drops_dots_rather_than_swapping(monkeypatch, speed):
         t = pd.DataFrame(uv, index=ids, columns=["u", "v"]).loc[g["id"]]
         assert np.hypot(*(g[["u_px", "v_px"]].to_numpy() - t.to_numpy()).T).max() < 1.0, k
     assert len(rep) > FRAMES * 10  # and something is tracked
+
+
+def test_motion_of_a_third_of_the_spacing_is_followed_from_a_standing_start(monkeypatch):
+    """Dots moving 1.8-3.9 px a frame on a 10 px grid (a chunk's first frames, or a step of
+    several frames), unevenly (the bottom slower): the motion the frame shows moves the
+    predictions, so at least 95 % of the dots are kept at every frame, each its own dot."""
+    import sys
+
+    here = sys.modules[__name__]
+    slow = truth_positions
+
+    def fast(frame):
+        ids, uv0 = slow(0)
+        return ids, uv0 + (slow(frame)[1] - uv0) * 5.0
+
+    monkeypatch.setattr(here, "truth_positions", fast)
+    monkeypatch.setattr(here, "bar_columns", lambda frame: (W + 10.0, W + 20.0))  # no bar (off the image)
+    n = 12
+    step = np.diff(np.stack([fast(k)[1] for k in range(n)]), axis=0)
+    assert 1.5 < np.linalg.norm(step, axis=2).min() and np.linalg.norm(step, axis=2).max() < 4.0
+    tracks = track_frames(((k, render(k)) for k in range(n)), first_labels(), "cam01", range(n))
+    rep = tracks[tracks["reason"] == ""]
+    kept = rep.groupby("frame")["id"].nunique()
+    assert kept.min() >= 0.95 * kept.loc[0], kept.to_dict()
+    for k, g in rep.groupby("frame"):
+        ids, uv = fast(k)
+        t = pd.DataFrame(uv, index=ids, columns=["u", "v"]).loc[g["id"]]
+        assert np.hypot(*(g[["u_px", "v_px"]].to_numpy() - t.to_numpy()).T).max() < 1.0, k
 
 
 # --- degraded footage: noise, blur, uneven and changing light, compression ---------------------

@@ -4,7 +4,15 @@ The targets are labelled once, in the first recorded frame of a chunk (``triaxtr
 from there each ID is carried forward without detecting or identifying the frame again:
 
 1. **Predict** each target from its recent motion (constant velocity; a target that was not
-   reported in the previous frame moves with its neighbours, see 4).
+   reported in the previous frame moves with its neighbours, see 4), then move the prediction by
+   the motion the frame shows: the blobs found within their gate of their predictions are the
+   targets' own, and their motion spreads from them to their neighbours across the grid
+   (unwrapped as phase is: a blob one dot over is told from the target's own by its
+   neighbours' motion), where it differs from the prediction by more than a quarter of a gate
+   every target is measured again. So motion of up to about half the dot spacing is followed
+   from a standing start (a chunk's first frames, a step of several frames), and a region that
+   moves farther is dropped, never locked one dot over. A first velocity is the first motion
+   measured, not averaged with an unknown zero.
 2. **Measure** it locally (:mod:`triaxtrack.window`): in a small window around the prediction
    the window's own white level (a trimmed mean of its brighter pixels) and pixel noise (held
    to the frame's) are measured; ink is darker than the white level by ``ink_fraction`` of it
@@ -81,6 +89,9 @@ STEADY_FRAMES = 2  # ... for this many frames in a row (so that their velocity i
 FAR_NEIGHBOURS = 4.0  # x spacing: how far vouching neighbours are sought for a target found again
 CONFIRM_PASSES = 5  # rounds in which targets found again are confirmed by their neighbours
 VELOCITY_SMOOTHING = 0.5  # weight of the previous velocity (one noisy or biased frame moves it less)
+# where the motion a frame shows moves some prediction by more than this share of its gate, the
+# frame's targets are measured again from the moved predictions (else the move is only noise)
+REPREDICT_SHARE = 0.25
 REASONS = (
     "edge", "lost", "merged", "shape", "jump", "ambiguous", "drift", "unconfirmed", "disagrees",
     "not_recorded",
@@ -141,6 +152,7 @@ class _State:
     pred: np.ndarray  # (n, 2) where each target is expected in the next frame
     last_uv: np.ndarray  # (n, 2) where it was last reported
     last_vel: np.ndarray  # (n, 2) its velocity then, pixels per frame
+    timed: np.ndarray  # (n,) whether that velocity was measured (else zero: not yet known)
     blind: np.ndarray  # (n,) frames measured and not reported since it was last reported
     since: np.ndarray  # (n,) frames (of any kind) from when it was last reported to this one
     steady: int = 0  # frames in a row in which STEADY_SHARE of the targets were reported
@@ -179,7 +191,8 @@ def _init_state(labels: pd.DataFrame, cfg: TrackingConfig) -> _State:
         ids=ids, ref_uv=np.full((n, 2), np.nan), ref_mass=np.full(n, np.nan), ref_smass=np.zeros(n),
         last_mass=np.full(n, np.nan), last_smass=np.zeros(n), radius=radius,
         spacing=spacing, neighbours=_neighbours(uv, target_kind(ids)), pred=uv.copy(), last_uv=uv.copy(),
-        last_vel=np.zeros((n, 2)), blind=np.zeros(n, np.int64), since=np.ones(n, np.int64),
+        last_vel=np.zeros((n, 2)), timed=np.zeros(n, bool), blind=np.zeros(n, np.int64),
+        since=np.ones(n, np.int64),
     )  # fmt: skip
 
 
@@ -273,6 +286,117 @@ def _solve3(a: np.ndarray, rhs: np.ndarray) -> None:
             rhs[r, k] /= a[r, r]
 
 
+@numba.njit(cache=True)
+def _median2(buf: np.ndarray, m: int) -> tuple[float, float]:
+    """Per-axis median of the first ``m`` rows of ``buf`` (k, 2)."""
+    u, v = np.sort(buf[:m, 0]), np.sort(buf[:m, 1])
+    if m % 2:
+        return u[m // 2], v[m // 2]
+    return 0.5 * (u[m // 2 - 1] + u[m // 2]), 0.5 * (v[m // 2 - 1] + v[m // 2])
+
+
+@numba.njit(cache=True)
+def _unwrap_motion(
+    miss: np.ndarray, found: np.ndarray, pos: np.ndarray, nb: np.ndarray, tol: np.ndarray, min_count: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`_frame_motion`'s kernel: ``(motion (n, 2), known (n,))`` from the ``found``
+    targets' ``miss`` (n, 2) at positions ``pos`` (n, 2), neighbours ``nb`` (n, k; n: none),
+    tolerances ``tol`` (n,) pixels."""
+    n, k = nb.shape
+    motion = np.zeros((n, 2))
+    known = np.zeros(n, np.bool_)
+    for i in range(n):  # the seeds: a miss within the gate is the target's own motion
+        if found[i] and miss[i, 0] ** 2 + miss[i, 1] ** 2 <= tol[i] ** 2:
+            motion[i], known[i] = miss[i], True
+    buf = np.empty((k, 2))
+    for _ in range(n):  # each round reaches the targets next to the known ones
+        fresh = known.copy()
+        for i in range(n):
+            if known[i]:
+                continue
+            m = 0
+            for q in range(k):
+                j = nb[i, q]
+                if j < n and known[j]:
+                    buf[m] = motion[j]
+                    m += 1
+            if m < min_count:
+                continue
+            cu, cv = _median2(buf, m)
+            motion[i, 0], motion[i, 1], fresh[i] = cu, cv, True
+            if not found[i]:
+                continue
+            # the blob found is this dot, or a neighbour j one offset (pos_j - pos_i) over
+            best = (miss[i, 0] - cu) ** 2 + (miss[i, 1] - cv) ** 2
+            bu, bv = miss[i, 0], miss[i, 1]
+            for q in range(k):
+                j = nb[i, q]
+                if j >= n:
+                    continue
+                au, av = miss[i, 0] - (pos[j, 0] - pos[i, 0]), miss[i, 1] - (pos[j, 1] - pos[i, 1])
+                d = (au - cu) ** 2 + (av - cv) ** 2
+                if d < best:
+                    best, bu, bv = d, au, av
+            if best <= tol[i] ** 2:
+                motion[i, 0], motion[i, 1] = bu, bv
+        if (fresh == known).all():
+            break
+        known = fresh
+    agree = known.copy()  # each motion must agree with its known neighbours' median
+    for i in range(n):
+        if not known[i]:
+            continue
+        m = 0
+        for q in range(k):
+            j = nb[i, q]
+            if j < n and known[j]:
+                buf[m] = motion[j]
+                m += 1
+        if m >= min_count:
+            cu, cv = _median2(buf, m)
+            agree[i] = (motion[i, 0] - cu) ** 2 + (motion[i, 1] - cv) ** 2 <= tol[i] ** 2
+    return motion, agree
+
+
+def _frame_motion(state: _State, pred: np.ndarray, meas: WindowMeasure, gate: float) -> np.ndarray:
+    """(n, 2) the move of each target's prediction ``pred`` that the frame shows, zero where it
+    is found within its gate (it is measured already) or its motion is not known beyond doubt.
+
+    A blob found within its gate of the prediction is the target's own (a seed); from the seeds
+    the motion spreads to their neighbours, round by round, as their median motion, and a found
+    blob is taken as the target's own where it, or the neighbouring dot it may be (a grid looks
+    the same one dot over), moves within the gate of that median: the motion is unwrapped from
+    where it is small (the fixed pedestal, the cap's coded targets far apart) across the grid,
+    as phase is. A motion that departs from its neighbours' median by more than the gate is not
+    known. Where no target moves within its gate of its prediction (a region moving by half the
+    dot spacing or more from a standing start), nothing is known and targets are dropped, never
+    locked one dot over."""
+    found = meas.reason == ""
+    miss = np.where(found[:, None], np.nan_to_num(meas.uv - pred), 0.0)
+    tol = gate * state.spacing
+    motion, known = _unwrap_motion(miss, found, pred, state.neighbours, tol, MIN_FLOW_NEIGHBOURS)
+    seed = found & (np.linalg.norm(miss, axis=1) <= tol)
+    return np.where((known & ~seed)[:, None], motion, 0.0)
+
+
+def _corrected_prediction(
+    state: _State, gray: np.ndarray, cfg: TrackingConfig, pred: np.ndarray, meas: WindowMeasure
+) -> tuple[np.ndarray, WindowMeasure]:
+    """The predictions ``pred`` (n, 2) moved by the motion the frame shows (:func:`_frame_motion`)
+    and the measurement ``meas`` with the targets whose prediction moved by more than
+    ``REPREDICT_SHARE`` of their gate measured again from there. A constant-velocity prediction
+    misses by the whole motion at a chunk's first frames (no velocity yet), after a step of
+    several frames and when the motion changes; in steady tracking nothing moves."""
+    shift = _frame_motion(state, pred, meas, cfg.gate)
+    again = np.linalg.norm(shift, axis=1) > REPREDICT_SHARE * cfg.gate * state.spacing
+    again &= np.isfinite(state.ref_mass)
+    if again.any():
+        new = measure_targets(gray, np.where(again[:, None], pred + shift, np.nan), state.radius, cfg)
+        pick = [again[:, None] if a.ndim == 2 else again for a in meas]
+        meas = WindowMeasure(*(np.where(c, b, a) for c, a, b in zip(pick, meas, new, strict=True)))
+    return pred + shift, meas
+
+
 def _vouchers(state: _State, vouch: np.ndarray, which: np.ndarray) -> np.ndarray:
     """(n, NEIGHBOURS) neighbours of the targets ``which`` among the vouching ones of their kind,
     within ``FAR_NEIGHBOURS`` times their spacing (index n: none); other rows empty."""
@@ -322,6 +446,8 @@ def _step(state: _State, gray: np.ndarray | None, cfg: TrackingConfig, first: bo
     # targets left out of the chunk at its first frame are not measured again (NaN: 'lost')
     probe = pred if first else np.where(np.isfinite(state.ref_mass)[:, None], pred, np.nan)
     meas = measure_targets(gray, probe, state.radius, cfg)
+    if not first:  # the prediction moved by the motion the frame shows
+        pred, meas = _corrected_prediction(state, gray, cfg, pred, meas)
     uv, mass, smass, reason = meas.uv, meas.mass, meas.sigma_mass, meas.reason.copy()
     if first:  # the tracker's centroid must agree with the detection's, or the target is left out
         agree = (reason == "") & (np.linalg.norm(uv - pred, axis=1) <= cfg.first_agreement_px)
@@ -393,8 +519,10 @@ def _step(state: _State, gray: np.ndarray | None, cfg: TrackingConfig, first: bo
     state.steady = state.steady + 1 if ok.sum() >= STEADY_SHARE * live else 0
     steady = ok & (state.blind == 0)
     moved = (uv - state.last_uv) / state.since[:, None]  # per frame since it was last reported
-    vel = VELOCITY_SMOOTHING * state.last_vel + (1 - VELOCITY_SMOOTHING) * moved
+    smoothed = VELOCITY_SMOOTHING * state.last_vel + (1 - VELOCITY_SMOOTHING) * moved
+    vel = np.where(state.timed[:, None], smoothed, moved)
     state.last_vel = np.where(steady[:, None], vel, state.last_vel)
+    state.timed = state.timed | (steady & (not first))
     state.last_uv = np.where(ok[:, None], uv, state.last_uv)
     state.last_mass = np.where(ok, mass, state.last_mass)
     state.last_smass = np.where(ok, smass, state.last_smass)
