@@ -172,14 +172,19 @@ def test_snakemake_names_the_config_file_and_the_key_without_the_schema(tmp_path
 
 
 def test_a_failed_job_prints_its_reason_and_unknown_test_yaml_keys_are_warned_about(tmp_path):
-    """A recorded test whose test.yaml has `frame: 6` (a typo of `frames`) and an empty video: the
-    warning names the key, and the probe job's failure reaches the console with its reason."""
+    """A recorded test whose test.yaml has `frame: 6` (a typo of `frames`) and a video cut short
+    behind a whole index (its index, read when the workflow loads, is intact): the warning names
+    the key, and the probe job's failure reaches the console with its reason."""
+    from test_probe_faults import cut, write_video
+
     folder = tmp_path / "lab-test"
     (folder / "videos").mkdir(parents=True)
     (folder / "kit").mkdir()
-    (folder / "videos" / "cam01.mp4").touch()
+    video = folder / "videos" / "cam01.mp4"
+    cut(write_video(tmp_path / "whole.mp4", faststart=True), video, 0.6)
+    write_video(folder / "videos" / "cam02.mp4")
     (folder / "test.yaml").write_text(yaml.safe_dump({"name": "lab", "fps": 15, "frames": 6, "frame": 6,
-                                                      "cameras": ["cam01"]}))  # fmt: skip
+                                                      "cameras": ["cam01", "cam02"]}))  # fmt: skip
     work = workflow_copy(tmp_path)
     proc = run_snakemake("--cores", "1", "--config", f"test={folder}", "--",
                          "results/lab/inventory/cam01.json", workdir=work, timeout=None)  # fmt: skip
@@ -188,5 +193,4 @@ def test_a_failed_job_prints_its_reason_and_unknown_test_yaml_keys_are_warned_ab
     assert f"{folder / 'test.yaml'}: unknown top-level key(s) 'frame' (did you mean 'frames'?)" in output
     assert "triaxtrack: 1 job(s) failed; the reason at the end of each job's log:" in output, output
     assert "  rule probe_video, logs/lab/probe_video/cam01.log:\n" in output
-    video = folder / "videos" / "cam01.mp4"
-    assert f"    ValueError: {video}: the video file is empty (0 bytes)" in output
+    assert f"    ValueError: {video}: truncated video: its index lists" in output

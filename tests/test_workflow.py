@@ -15,9 +15,12 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 import pytest
 import yaml
+
+from triaxtrack.video import encode_video
 
 REPO = Path(__file__).resolve().parents[1]
 TIMEOUT_S = 300
@@ -80,13 +83,15 @@ def write_yaml(path: Path, data: dict) -> Path:
 
 
 def recorded_folder(root: Path, test_yaml: dict) -> Path:
-    """A recorded test folder: test.yaml, an (empty) video per camera and an (empty) kit/."""
+    """A recorded test folder: test.yaml, a tiny readable video per camera (two blank frames: the
+    workflow probes each video's index when it loads) and an (empty) kit/."""
     write_yaml(root / "test.yaml", test_yaml)
     (root / "kit").mkdir()
     (root / "videos").mkdir()
     for camera in test_yaml.get("cameras", []):
         name = camera if isinstance(camera, str) else camera["name"]
-        (root / "videos" / f"{name}.mp4").touch()
+        video = root / "videos" / f"{name}.mp4"
+        encode_video([np.zeros((48, 64), np.uint8)] * 2, video, test_yaml.get("fps", 15))
     return root
 
 
@@ -165,6 +170,31 @@ def test_simulated_and_recorded_tests_together(tmp_path):
     assert counts["triangulate_chunk"] == 3 + 2
     assert counts["collect_labels"] == counts["reconstruct_cell"] == counts["trace_specimen"] == 2
     assert counts["measure_volume"] == counts["report_figures"] == 2
+
+
+def test_a_camera_whose_video_cannot_be_read_is_left_out(tmp_path):
+    """A recorded test with one video missing and one empty: both cameras are left out when the
+    workflow loads, each named with why, and the test goes on with the others; with
+    `on_bad_camera: fail`, or fewer than `min_cameras` left, it stops and says why."""
+    spec = {"name": "wf-rec", "fps": 15, "frames": 30, "cameras": ["camA", "camB", "camC", "camD"]}
+    folder = recorded_folder(tmp_path / "rec", spec)
+    (folder / "videos" / "camB.mp4").unlink()
+    (folder / "videos" / "camC.mp4").write_bytes(b"")
+    proc = run_snakemake("-n", "--forceall", "--nolock", "--quiet", "rules", "--config", f"test={folder}",
+                         "min_cameras=2")  # fmt: skip
+    output = proc.stdout + proc.stderr
+    assert proc.returncode == 0, output
+    assert job_counts(output)["calibrate_camera"] == job_counts(output)["identify_targets"] == 2
+    assert "camera camB left out (on_bad_camera: skip): " in output and "camB.mp4" in output
+    empty = f"{folder / 'videos' / 'camC.mp4'}: the video file is empty"
+    assert f"camera camC left out (on_bad_camera: skip): {empty}" in output
+    for extra, says in (
+        ("on_bad_camera=fail", "cannot be read (on_bad_camera: fail)"),
+        ("min_cameras=3", "only 2 of 4 cameras can be measured, fewer than min_cameras (3)"),
+    ):
+        proc = run_snakemake("-n", "--nolock", "--config", f"test={folder}", "min_cameras=2", extra)
+        assert proc.returncode != 0 and says in proc.stdout + proc.stderr, proc.stdout + proc.stderr
+        assert "camC.mp4: the video file is empty" in proc.stdout + proc.stderr
 
 
 def test_invalid_test_yaml_names_the_file(tmp_path):

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from collections import Counter
+from pathlib import Path
 
 FPS_REL_TOL = 1e-3  # container frame rates are rationals; 1e-3 absorbs 30000/1001 vs 29.97
 
@@ -72,3 +73,36 @@ def summarize_probes(test: dict, probes: list[dict], name: str, *, strict: bool 
         "flagged": [c["camera"] for c in cameras if c["flags"]],
         "problems": problems,
     }
+
+
+def video_problem(path: str | Path) -> str | None:
+    """Why the video at ``path`` cannot be measured, in words naming the file (missing, empty,
+    truncated, no frames, not a video: :func:`triaxtrack.video.probe_video` on its index, so a
+    few milliseconds at parse time), or None if it can be read."""
+    from triaxtrack.video import probe_video
+
+    try:
+        probe_video(path, index_only=True)
+    except (OSError, ValueError) as exc:
+        return str(exc)
+    return None
+
+
+def usable_cameras(
+    videos: dict[str, str | Path], on_bad_camera: str = "skip", min_cameras: int = 8, source: str = "test"
+) -> tuple[list[str], dict[str, str]]:
+    """``(cameras kept, {camera left out: why})`` of a recorded test from its cameras' videos
+    (``{camera: path}``, in test.yaml's order): a camera whose video cannot be read
+    (:func:`video_problem`) is left out with ``on_bad_camera="skip"``; with ``"fail"``, or when
+    cameras are left out and fewer than ``min_cameras`` are kept (a test recorded with fewer,
+    all readable, is measured with them), or fewer than two are kept, ValueError naming
+    ``source`` and every camera left out and why."""
+    problems = {camera: p for camera, path in videos.items() if (p := video_problem(path)) is not None}
+    kept = [camera for camera in videos if camera not in problems]
+    listed = "".join(f"\n  {camera}: {why}" for camera, why in problems.items())
+    if problems and on_bad_camera == "fail":
+        raise ValueError(f"{source}: camera video(s) cannot be read (on_bad_camera: fail):{listed}")
+    if len(kept) < (min_cameras if problems else 2):
+        raise ValueError(f"{source}: only {len(kept)} of {len(videos)} cameras can be measured, fewer than "
+                         f"min_cameras ({min_cameras}) or 2; left out:{listed or ' none'}")  # fmt: skip
+    return kept, problems

@@ -143,10 +143,12 @@ def timestep_quality(
     motion: pd.DataFrame,
     handovers: list[dict],
     membrane_ids: np.ndarray,
+    cameras_left_out: dict[str, str] | None = None,
 ) -> dict:
     """``quality.json`` of the whole test: the first-frame reconstruction's (``reference``:
     cell, cell frame, air residuals) with the reprojection errors and counts of every processed
-    frame, the tracking losses, the camera-motion check and the chunk handovers."""
+    frame, the tracking losses, the camera-motion check, the chunk handovers and the cameras
+    left out of the test (``{camera: why}``, e.g. an unreadable video)."""
     used = residuals[residuals["used"].astype(bool)]
     err = np.hypot(used["du_px"], used["dv_px"])
     per_camera = {}
@@ -185,6 +187,7 @@ def timestep_quality(
         "mean_reprojection_px": float(err.mean()) if len(err) else float("nan"),
         "reference_frame": {k: reference.get(k) for k in ("mean_reprojection_px", "frames")},
         "per_camera": per_camera,
+        "cameras_left_out": dict(cameras_left_out or {}),
         "frames": frames,
         "tracking": {
             "camera_frames": int(tracks[["camera", "frame"]].drop_duplicates().shape[0]),

@@ -198,12 +198,43 @@ def get_test_dir(test):
 
 
 def get_cameras(test):
-    """Camera names: cam01..camNN for simulated tests, test.yaml's order for recorded ones."""
+    """Camera names: cam01..camNN for simulated tests; for recorded ones test.yaml's order,
+    less the cameras left out (get_cameras_left_out)."""
     spec = _spec(test)
     if "simulate" in spec:
         n = _sim_config(test)["cameras"]
         return [f"cam{i:0{CAMERA_NAME_DIGITS}d}" for i in range(1, n + 1)]
-    return [c["name"] for c in spec["recorded"]["cameras"]]
+    return _recorded_cameras(test)[0]
+
+
+def get_cameras_left_out(wildcards):
+    """{camera: why} of the cameras of a recorded test whose video cannot be read (missing,
+    empty, unreadable), left out with `on_bad_camera: skip`; {} for simulated tests."""
+    if "simulate" in _spec(wildcards.test):
+        return {}
+    return _recorded_cameras(wildcards.test)[1]
+
+
+@cache
+def _recorded_cameras(test):
+    """(cameras kept, {left out: why}) of a recorded test, its videos checked at parse time
+    (triaxtrack.inventory.usable_cameras); a WorkflowError with `on_bad_camera: fail` or fewer
+    than `min_cameras` kept."""
+    from triaxtrack.inventory import usable_cameras
+
+    names = [c["name"] for c in _spec(test)["recorded"]["cameras"]]
+    videos = {name: _recorded_video(test, name) for name in names}
+    try:
+        kept, left_out = usable_cameras(
+            videos, config["on_bad_camera"], config["min_cameras"], f"test {test!r}"
+        )
+    except ValueError as exc:
+        raise WorkflowError(str(exc)) from None
+    for camera, why in left_out.items():
+        logger.warning(
+            f"test {test!r}: camera {camera} left out (on_bad_camera: skip): {why}"
+        )
+    return kept, left_out
 
 
 @cache

@@ -91,5 +91,6 @@ rule collect_timesteps:
         runtime=20,
     params:
         handover_px=config["tracking"]["handover_px"],
+        cameras_left_out=get_cameras_left_out,
     script:
         "../scripts/collect_timesteps.py"

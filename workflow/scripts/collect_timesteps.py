@@ -29,7 +29,9 @@ tracks = concat_tables(snakemake.input.tracks, TRACKS)
 shared = concat_tables(snakemake.input.handovers, TRACKS)
 handovers = handover_checks(shared, read_table(snakemake.input.labels, LABELS), snakemake.params.handover_px)
 reference = json.load(open(snakemake.input.reference))
-quality = timestep_quality(reference, points, residuals, tracks, motion, handovers, membrane_ids)
+quality = timestep_quality(
+    reference, points, residuals, tracks, motion, handovers, membrane_ids, snakemake.params.cameras_left_out
+)
 
 write_table(points, snakemake.output.points, POINTS)
 write_table(observations_table(tracks, residuals), snakemake.output.observations, OBSERVATIONS)

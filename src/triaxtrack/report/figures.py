@@ -239,7 +239,9 @@ def reprojection_figure(quality: dict, width_px: int = 900) -> Figure:
         sublabels=sub,
         hline=("mean, all cameras", mean) if np.isfinite(mean) else None,
     )
-    axes[0].set_xlabel("camera")
+    left_out = quality.get("cameras_left_out") or {}
+    note = f" (left out: {', '.join(sorted(left_out))}; why: quality.json)" if left_out else ""
+    axes[0].set_xlabel("camera" + note)
     if len(frames):
         ax = axes[1]
         ax.set(title="mean reprojection error per frame, all cameras", xlabel="frame",
