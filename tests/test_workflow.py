@@ -197,6 +197,19 @@ def test_a_camera_whose_video_cannot_be_read_is_left_out(tmp_path):
         assert "camC.mp4: the video file is empty" in proc.stdout + proc.stderr
 
 
+def test_an_archive_of_test_folders_is_processed_folder_by_folder(tmp_path):
+    for name, cameras in (("tx-001", ["a", "b"]), ("tx-002", ["a", "b", "c"])):
+        spec = {"name": name, "fps": 15, "frames": 30, "cameras": cameras}
+        recorded_folder(tmp_path / "archive" / name, spec)
+    (tmp_path / "archive" / "notes").mkdir()  # not a test folder: no test.yaml
+    counts = dry_run("--config", f"tests_dir={tmp_path / 'archive'}")
+    assert counts["probe_video"] == counts["calibrate_camera"] == 2 + 3
+    assert counts["measure_volume"] == counts["inventory"] == 2
+    proc = run_snakemake("-n", "--nolock", "--config", f"tests_dir={tmp_path / 'archive' / 'notes'}")
+    output = proc.stdout + proc.stderr
+    assert proc.returncode != 0 and "no test folder (a folder with a test.yaml) in it" in output
+
+
 def test_invalid_test_yaml_names_the_file(tmp_path):
     folder = recorded_folder(tmp_path / "bad", {"name": "wf-bad", "cameras": ["camA"]})
     proc = run_snakemake("-n", "--nolock", "--config", f"test={folder}")

@@ -123,9 +123,13 @@ def load_test_yaml(folder):
 def _collect_tests():
     """name -> spec. A spec has either `simulate` (overrides of config["simulation"]) or
     `path` (a recorded test folder) and `recorded` (its validated test.yaml).
-    `--config test=PATH` replaces the `tests` list by that one recorded folder."""
+    `--config test=PATH` replaces the `tests` list by that one recorded folder, and
+    `--config tests_dir=DIR` by every folder in DIR that holds a test.yaml (an archive).
+    """
     if config.get("test"):
         entries = [{"path": config["test"]}]
+    elif config.get("tests_dir"):
+        entries = [{"path": str(p.parent)} for p in _archive_tests(config["tests_dir"])]
     else:
         entries = config["tests"]
     tests = {}
@@ -145,6 +149,19 @@ def _collect_tests():
             )
         tests[name] = spec
     return tests
+
+
+def _archive_tests(folder):
+    """The test.yaml of every test folder directly in FOLDER, in name order."""
+    root = Path(folder)
+    if not root.is_dir():
+        raise WorkflowError(f"tests_dir {folder}: not a folder")
+    found = sorted(root.glob("*/test.yaml"))
+    if not found:
+        raise WorkflowError(
+            f"tests_dir {folder}: no test folder (a folder with a test.yaml) in it"
+        )
+    return found
 
 
 TESTS = _collect_tests()
