@@ -8,7 +8,7 @@ import pytest
 
 from triaxtrack.detect import detect_blobs
 from triaxtrack.optics import Camera, project_air
-from triaxtrack.timesteps import camera_motion, handover_check, tracking_summary
+from triaxtrack.timesteps import camera_motion, handover_check, large_losses, tracking_summary
 from triaxtrack.track import (
     TrackingConfig,
     chunk_frames,
@@ -400,3 +400,16 @@ def test_mass_is_normalised_by_the_white_level():
     summed = [measure_blobs(g, uv, np.full(len(uv), D_RADIUS + 1))[2] for g in (bright, dim)]
     ratio = summed[1] / summed[0]
     assert abs(ratio.mean() - 0.5) < 0.0075 and np.abs(ratio - 0.5).max() < 0.025
+
+
+def test_camera_frames_with_large_losses_are_flagged():
+    """A camera-frame that reports under half of the camera's median frame is flagged, with its
+    share; a camera that loses a few targets is not."""
+    rows = [
+        (cam, frame, target, "lost" if (cam == "b" and frame == 3 and target < 7) or target == 9 else "")
+        for cam in ("a", "b") for frame in range(5) for target in range(10)
+    ]  # fmt: skip
+    tracks = pd.DataFrame(rows, columns=["camera", "frame", "id", "reason"])
+    flagged = large_losses(tracks)
+    assert flagged[["camera", "frame", "reported"]].values.tolist() == [["b", 3, 2]]
+    assert flagged["share"].iloc[0] == pytest.approx(2 / 9)

@@ -118,6 +118,21 @@ def handover_check(tracked: pd.DataFrame, labels: pd.DataFrame, tol_px: float = 
     }
 
 
+LARGE_LOSS_SHARE = 0.5  # a camera-frame reporting less than this share of the camera's median
+# frame has lost targets wholesale (flicker, an occluder, a moved or failing camera), not one by one
+
+
+def large_losses(tracks: pd.DataFrame) -> pd.DataFrame:
+    """The camera-frames of ``tracks`` (``TRACKS``; a row repeated, a frame two chunks share, is
+    counted once) that report less than ``LARGE_LOSS_SHARE`` of the targets the camera reports
+    at its median frame: columns camera, frame, reported, share (of that median)."""
+    t = tracks.drop_duplicates(["camera", "frame", "id"], keep="last")
+    reported = (t["reason"] == "").groupby([t["camera"], t["frame"]]).sum().rename("reported").reset_index()
+    median = reported.groupby("camera")["reported"].transform("median")
+    reported["share"] = reported["reported"] / median.where(median > 0)
+    return reported[reported["share"] < LARGE_LOSS_SHARE].reset_index(drop=True)
+
+
 def tracking_summary(tracks: pd.DataFrame) -> pd.DataFrame:
     """Per camera and frame: targets followed, reported, and dropped by reason (wide table)."""
     t = tracks.assign(reason=tracks["reason"].replace("", "reported"))
@@ -147,8 +162,9 @@ def timestep_quality(
 ) -> dict:
     """``quality.json`` of the whole test: the first-frame reconstruction's (``reference``:
     cell, cell frame, air residuals) with the reprojection errors and counts of every processed
-    frame, the tracking losses, the camera-motion check, the chunk handovers and the cameras
-    left out of the test (``{camera: why}``, e.g. an unreadable video)."""
+    frame, the tracking losses (``large_losses``: camera-frames that lost targets wholesale,
+    :func:`large_losses`), the camera-motion check, the chunk handovers and the cameras left out
+    of the test (``{camera: why}``, e.g. an unreadable video)."""
     used = residuals[residuals["used"].astype(bool)]
     err = np.hypot(used["du_px"], used["dv_px"])
     per_camera = {}
@@ -196,6 +212,11 @@ def timestep_quality(
             "membrane_dots_first_frame": len(mem0),
             "membrane_dots_kept_to_last_frame": len(mem0 & mem1),
             "membrane_kept_share": len(mem0 & mem1) / len(mem0) if mem0 else float("nan"),
+            "large_losses": [
+                {"camera": str(r.camera), "frame": int(r.frame), "reported": int(r.reported),
+                 "share_of_median": round(float(r.share), 3)}
+                for r in large_losses(tracks).itertuples(index=False)
+            ],  # fmt: skip
         },
         "camera_motion": {
             "max_drift_px": float(motion["drift_px"].max()) if len(motion) else float("nan"),

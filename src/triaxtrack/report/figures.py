@@ -21,6 +21,7 @@ from matplotlib.figure import Figure
 from triaxtrack.report.common import number
 from triaxtrack.report.layout import MembraneLayout
 from triaxtrack.report.style import PALETTE, new_figure, no_data, styled
+from triaxtrack.timesteps import LARGE_LOSS_SHARE, large_losses
 
 __all__ = [
     "LOSS_REASONS",
@@ -313,13 +314,16 @@ def tracking_figure(tracks: pd.DataFrame, layout: MembraneLayout, width_px: int 
     cams = [str(c) for c in per_cam.index]
     lost = per_cam.drop(columns=[""], errors="ignore").sum(axis=1).to_numpy(float)
     stacks = [(r, per_cam[r].to_numpy(float), colour[r]) for r in reasons]
+    flagged = large_losses(t)["camera"].value_counts()
     draw_bars(
         axes[2],
         cams,
         stacks or [("", np.zeros(len(cams)), PALETTE[0])],
-        title="target-frames not reported per camera over the test, by reason",
+        title="target-frames not reported per camera over the test, by reason "
+        f"(under each camera: frames with large losses, below {LARGE_LOSS_SHARE:.0%} of its median frame)",
         ylabel="target-frames",
         annotate=[f"{v:.0f}" for v in lost],
+        sublabels=[f"{flagged.get(c, 0)} flagged" for c in cams],
     )
     axes[2].set_xlabel("camera")
     return fig
