@@ -69,12 +69,12 @@ from __future__ import annotations
 from collections.abc import Collection, Iterable
 from dataclasses import dataclass, fields
 
-import numba
 import numpy as np
 import pandas as pd
 from scipy.spatial import cKDTree
 
 from triaxtrack.detect import DetectParams
+from triaxtrack.neighbour_motion import affine_flow, unwrap_motion
 from triaxtrack.window import WindowMeasure, measure_windows
 
 NEIGHBOURS = 12  # same-kind neighbours whose motion predicts a target's (local affine flow)
@@ -223,139 +223,7 @@ def _affine_flow(
     ``(pred (n, 2), valid (n,))`` from the displacements ``disp`` (n, 2) of the ``ok`` ones.
     ``neighbours`` (n, k) indices (n: none) replace the fixed ``state.neighbours``."""
     nb = state.neighbours if neighbours is None else neighbours
-    return _flow_kernel(state.ref_uv, disp, ok, nb)
-
-
-@numba.njit(cache=True)
-def _flow_kernel(
-    ref_uv: np.ndarray, disp: np.ndarray, ok: np.ndarray, nb: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`_affine_flow`: per target, the least-squares affine map ``d = a + B dx`` of its ``ok``
-    neighbours' displacements ``d`` over their offsets ``dx`` at the reference frame (normal
-    equations, 1e-6 added to the diagonal, solved by Gaussian elimination with partial pivoting);
-    its constant term ``a`` is the prediction. Zero where not valid (too few neighbours, or no
-    reference position)."""
-    n = len(ref_uv)
-    pred, valid = np.zeros((n, 2)), np.zeros(n, np.bool_)
-    a, rhs = np.empty((3, 3)), np.empty((3, 2))
-    for i in range(n):
-        if not (np.isfinite(ref_uv[i, 0]) and np.isfinite(ref_uv[i, 1])):
-            continue
-        xx = xy = x = yy = y = used = xu = xv = yu = yv = u = v = 0.0  # sums of the normal equations
-        for k in range(nb.shape[1]):
-            j = nb[i, k]
-            if j >= n or not ok[j]:
-                continue
-            dx, dy, du, dv = ref_uv[j, 0] - ref_uv[i, 0], ref_uv[j, 1] - ref_uv[i, 1], disp[j, 0], disp[j, 1]
-            xx, xy, x, yy, y, used = xx + dx * dx, xy + dx * dy, x + dx, yy + dy * dy, y + dy, used + 1.0
-            xu, xv, yu, yv, u, v = xu + dx * du, xv + dx * dv, yu + dy * du, yv + dy * dv, u + du, v + dv
-        if used < MIN_FLOW_NEIGHBOURS:
-            continue
-        a[0, 0], a[0, 1], a[0, 2], rhs[0, 0], rhs[0, 1] = xx + 1e-6, xy, x, xu, xv
-        a[1, 0], a[1, 1], a[1, 2], rhs[1, 0], rhs[1, 1] = xy, yy + 1e-6, y, yu, yv
-        a[2, 0], a[2, 1], a[2, 2], rhs[2, 0], rhs[2, 1] = x, y, used + 1e-6, u, v
-        _solve3(a, rhs)
-        pred[i, 0], pred[i, 1], valid[i] = rhs[2, 0], rhs[2, 1], True
-    return pred, valid
-
-
-@numba.njit(cache=True)
-def _solve3(a: np.ndarray, rhs: np.ndarray) -> None:
-    """Solve ``a x = rhs`` (3 x 3, two right-hand sides) in place (``x`` into ``rhs``; ``a``
-    overwritten) by Gaussian elimination with partial pivoting, as LAPACK's gesv."""
-    for c in range(3):
-        p = c
-        for r in range(c + 1, 3):
-            if abs(a[r, c]) > abs(a[p, c]):
-                p = r
-        for k in range(3):
-            a[c, k], a[p, k] = a[p, k], a[c, k]
-        for k in range(2):
-            rhs[c, k], rhs[p, k] = rhs[p, k], rhs[c, k]
-        inv = 1.0 / a[c, c]
-        for r in range(c + 1, 3):
-            f = a[r, c] * inv
-            for k in range(c, 3):
-                a[r, k] -= f * a[c, k]
-            for k in range(2):
-                rhs[r, k] -= f * rhs[c, k]
-    for r in range(2, -1, -1):
-        for k in range(2):
-            for q in range(r + 1, 3):
-                rhs[r, k] -= a[r, q] * rhs[q, k]
-            rhs[r, k] /= a[r, r]
-
-
-@numba.njit(cache=True)
-def _median2(buf: np.ndarray, m: int) -> tuple[float, float]:
-    """Per-axis median of the first ``m`` rows of ``buf`` (k, 2)."""
-    u, v = np.sort(buf[:m, 0]), np.sort(buf[:m, 1])
-    if m % 2:
-        return u[m // 2], v[m // 2]
-    return 0.5 * (u[m // 2 - 1] + u[m // 2]), 0.5 * (v[m // 2 - 1] + v[m // 2])
-
-
-@numba.njit(cache=True)
-def _unwrap_motion(
-    miss: np.ndarray, found: np.ndarray, pos: np.ndarray, nb: np.ndarray, tol: np.ndarray, min_count: int
-) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`_frame_motion`'s kernel: ``(motion (n, 2), known (n,))`` from the ``found``
-    targets' ``miss`` (n, 2) at positions ``pos`` (n, 2), neighbours ``nb`` (n, k; n: none),
-    tolerances ``tol`` (n,) pixels."""
-    n, k = nb.shape
-    motion = np.zeros((n, 2))
-    known = np.zeros(n, np.bool_)
-    for i in range(n):  # the seeds: a miss within the gate is the target's own motion
-        if found[i] and miss[i, 0] ** 2 + miss[i, 1] ** 2 <= tol[i] ** 2:
-            motion[i], known[i] = miss[i], True
-    buf = np.empty((k, 2))
-    for _ in range(n):  # each round reaches the targets next to the known ones
-        fresh = known.copy()
-        for i in range(n):
-            if known[i]:
-                continue
-            m = 0
-            for q in range(k):
-                j = nb[i, q]
-                if j < n and known[j]:
-                    buf[m] = motion[j]
-                    m += 1
-            if m < min_count:
-                continue
-            cu, cv = _median2(buf, m)
-            motion[i, 0], motion[i, 1], fresh[i] = cu, cv, True
-            if not found[i]:
-                continue
-            # the blob found is this dot, or a neighbour j one offset (pos_j - pos_i) over
-            best = (miss[i, 0] - cu) ** 2 + (miss[i, 1] - cv) ** 2
-            bu, bv = miss[i, 0], miss[i, 1]
-            for q in range(k):
-                j = nb[i, q]
-                if j >= n:
-                    continue
-                au, av = miss[i, 0] - (pos[j, 0] - pos[i, 0]), miss[i, 1] - (pos[j, 1] - pos[i, 1])
-                d = (au - cu) ** 2 + (av - cv) ** 2
-                if d < best:
-                    best, bu, bv = d, au, av
-            if best <= tol[i] ** 2:
-                motion[i, 0], motion[i, 1] = bu, bv
-        if (fresh == known).all():
-            break
-        known = fresh
-    agree = known.copy()  # each motion must agree with its known neighbours' median
-    for i in range(n):
-        if not known[i]:
-            continue
-        m = 0
-        for q in range(k):
-            j = nb[i, q]
-            if j < n and known[j]:
-                buf[m] = motion[j]
-                m += 1
-        if m >= min_count:
-            cu, cv = _median2(buf, m)
-            agree[i] = (motion[i, 0] - cu) ** 2 + (motion[i, 1] - cv) ** 2 <= tol[i] ** 2
-    return motion, agree
+    return affine_flow(state.ref_uv, disp, ok, nb, MIN_FLOW_NEIGHBOURS)
 
 
 def _frame_motion(state: _State, pred: np.ndarray, meas: WindowMeasure, gate: float) -> np.ndarray:
@@ -374,7 +242,7 @@ def _frame_motion(state: _State, pred: np.ndarray, meas: WindowMeasure, gate: fl
     found = meas.reason == ""
     miss = np.where(found[:, None], np.nan_to_num(meas.uv - pred), 0.0)
     tol = gate * state.spacing
-    motion, known = _unwrap_motion(miss, found, pred, state.neighbours, tol, MIN_FLOW_NEIGHBOURS)
+    motion, known = unwrap_motion(miss, found, pred, state.neighbours, tol, MIN_FLOW_NEIGHBOURS)
     seed = found & (np.linalg.norm(miss, axis=1) <= tol)
     return np.where((known & ~seed)[:, None], motion, 0.0)
 
