@@ -108,6 +108,33 @@ def test_occluded_dots_are_dropped_and_picked_up_again(tracked):
     assert back and back <= set(rep.loc[rep["frame"] == FRAMES - 1, "id"])
 
 
+def test_dots_hidden_at_the_labelled_frame_are_taken_on_once_seen():
+    """With the grid of IDs, the dots under the bar at the labelled frame (never labelled) are
+    taken on from their reported neighbours once the bar has passed, each its own dot; without
+    it they are never followed."""
+    ids, uv = truth_positions(0)
+    grid = ids.reshape(14, 28)
+    frames = [(k, render(k)) for k in range(FRAMES)]
+    tracks = track_frames(frames, first_labels(), "cam01", range(FRAMES), grid=grid)
+    labelled = set(first_labels()["id"])
+    a, b = bar_columns(0)
+    hidden = set(ids[(uv[:, 0] > a - 2) & (uv[:, 0] < b + 2)]) - labelled
+    assert len(hidden) >= 14  # a column of the grid at least
+    a, b = bar_columns(FRAMES - 1)
+    ids29, uv29 = truth_positions(FRAMES - 1)
+    row = (ids29 - ids29.min()) // grid.shape[1]
+    inner = (row > 0) & (row < grid.shape[0] - 1)  # between rows (interpolated, never extrapolated)
+    clear = set(ids29[inner & ((uv29[:, 0] < a - 4) | (uv29[:, 0] > b + 4))])
+    rep = tracks[tracks["reason"] == ""]
+    last = set(rep.loc[rep["frame"] == FRAMES - 1, "id"])
+    assert len(hidden & clear & last) >= 0.95 * len(hidden & clear)
+    for k, g in rep[~rep["id"].isin(labelled)].groupby("frame"):
+        true = pd.DataFrame(truth_positions(k)[1], index=ids, columns=["u", "v"]).loc[g["id"]]
+        assert np.hypot(*(g[["u_px", "v_px"]].to_numpy() - true.to_numpy()).T).max() < 0.5, k
+    plain = track_frames(frames, first_labels(), "cam01", range(FRAMES))
+    assert not (set(plain["id"]) & hidden)
+
+
 def test_missing_frame_is_not_recorded_and_tracking_continues(tracked):
     f12 = tracked[tracked["frame"] == 12]
     assert (f12["reason"] == "not_recorded").all()

@@ -73,6 +73,7 @@ import numpy as np
 import pandas as pd
 from scipy.spatial import cKDTree
 
+from triaxtrack.completion import Candidates, Found, complete_grid, grid_candidates
 from triaxtrack.detect import DetectParams
 from triaxtrack.neighbour_motion import affine_flow, unwrap_motion
 from triaxtrack.window import WindowMeasure, measure_windows
@@ -127,6 +128,9 @@ def processed_frames(n_frames: int, fps: float, step_s: float | None) -> np.ndar
         return np.arange(n_frames, dtype=np.int64)
     k = np.rint(np.arange(0, (n_frames - 1) / fps + 1e-9, step_s) * fps).astype(np.int64)
     return np.unique(np.r_[k[k < n_frames], n_frames - 1])
+
+
+MEMBRANE = 3  # target_kind of a membrane dot
 
 
 def target_kind(ids: np.ndarray) -> np.ndarray:
@@ -417,37 +421,99 @@ def track_frames(
     camera: str,
     report: Collection[int],
     cfg: TrackingConfig | None = None,
+    grid: np.ndarray | None = None,
 ) -> pd.DataFrame:
     """Follow the labelled targets of ``labels`` (one camera's frame, ``LABELS`` columns; the
     unlabelled detections, id -1, only set each target's spacing) through ``frames``
-    (``(test frame, grey image or None)`` in order, starting at the labels' frame).
+    (``(test frame, grey image or None)`` in order, starting at the labels' frame). With the
+    kit's membrane ``grid`` (:func:`triaxtrack.completion.membrane_grid`), the membrane dots not
+    labelled are taken on once they can be seen between reported neighbours
+    (:mod:`triaxtrack.completion`), and reported from then on.
 
-    Returns a ``TRACKS`` table: one row per labelled target per frame in ``report`` (the
+    Returns a ``TRACKS`` table: one row per followed target per frame in ``report`` (the
     labels' frame included, re-measured by the tracker so that every frame has the same
     centroid estimator), ``sigma_px`` the standard uncertainty of each coordinate of a reported
     centroid (NaN where not reported), pixels.
     """
     cfg = cfg or TrackingConfig()
     state = _init_state(labels, cfg)
+    cand = grid_candidates(grid, state.ids) if grid is not None else None
     report = set(int(k) for k in report)
     parts: list[tuple] = []
     for i, (k, gray) in enumerate(frames):
         if i == 0 and gray is None:
             raise ValueError(f"{camera}: no picture of the labelled frame {k}")
         uv, area, sigma, reason = _step(state, gray, cfg, first=i == 0)
+        if cand is not None and gray is not None:
+            cand, found = _complete(state, gray, cand, grid, uv, cfg)
+            if len(found.ids):  # reported in this frame
+                new = found.meas
+                uv, area, sigma = np.r_[uv, new.uv], np.r_[area, new.area], np.r_[sigma, new.sigma_px]
+                reason = np.r_[reason, np.full(len(found.ids), "", object)]
         if int(k) in report:
-            parts.append((int(k), uv, area, sigma, reason))
+            parts.append((int(k), state.ids, uv, area, sigma, reason))
     if not parts:
         cols = ("camera", "frame", "id", "u_px", "v_px", "area_px", "reason", "sigma_px")
         return pd.DataFrame({c: [] for c in cols})
-    frame, uv, area, sigma, reason = zip(*parts, strict=True)  # one table at the end, not one a frame
+    frame, ids, uv, area, sigma, reason = zip(*parts, strict=True)  # one table at the end, not one a frame
     uv = np.concatenate(uv)
     return pd.DataFrame({
-        "camera": camera, "frame": np.repeat(np.array(frame, np.int64), len(state.ids)),
-        "id": np.tile(state.ids, len(parts)), "u_px": uv[:, 0], "v_px": uv[:, 1],
+        "camera": camera, "frame": np.repeat(np.array(frame, np.int64), [len(i) for i in ids]),
+        "id": np.concatenate(ids), "u_px": uv[:, 0], "v_px": uv[:, 1],
         "area_px": np.concatenate(area), "reason": np.concatenate(reason),  # str objects: str dtype
         "sigma_px": np.concatenate(sigma),
     })  # fmt: skip
+
+
+def _complete(
+    state: _State, gray: np.ndarray, cand: Candidates, grid: np.ndarray, uv: np.ndarray, cfg: TrackingConfig
+) -> tuple[Candidates, Found]:
+    """One frame of :func:`triaxtrack.completion.complete_grid` from the targets reported in it
+    (``uv`` (n, 2), NaN where not), the dots taken on added to ``state`` (:func:`_adopt`)."""
+    flat = state.ids - grid.flat[0]
+    member = (flat >= 0) & (flat < grid.size)
+    index = np.full(grid.size, -1, np.int64)
+    index[flat[member]] = np.nonzero(member)[0]
+    reported = np.isfinite(uv).all(axis=1)
+    cand, found = complete_grid(
+        gray, cand, index.reshape(grid.shape), uv, state.radius, np.where(reported, state.last_mass, np.nan),
+        lambda g, p, r: measure_targets(g, p, r, cfg), gate=cfg.gate, min_separation=cfg.min_separation,
+        max_fit_px=cfg.max_flow_residual_px,
+    )  # fmt: skip
+    if len(found.ids):
+        _adopt(state, found, reported)
+    return cand, found
+
+
+def _adopt(state: _State, found: Found, reported: np.ndarray) -> None:
+    """Add the dots ``found`` to ``state`` as targets reported in this frame: their neighbours
+    the nearest membrane targets ``reported`` (n,) in it, their reference place where their
+    neighbours' median displacement since the chunk's first frame puts them, their velocity
+    their neighbours' median."""
+    n, m = len(state.ids), len(found.ids)
+    uv = found.meas.uv
+    pool = reported & (target_kind(state.ids) == MEMBRANE) & np.isfinite(state.ref_uv).all(axis=1)
+    pool = np.nonzero(pool)[0]
+    k = min(NEIGHBOURS, len(pool))
+    nb_new = np.full((m, NEIGHBOURS), n + m, np.int64)
+    disp, vel = np.zeros((m, 2)), np.zeros((m, 2))
+    if k:
+        _, j = cKDTree(state.last_uv[pool]).query(uv, k=k)
+        j = pool[np.asarray(j).reshape(m, k)]
+        nb_new[:, :k] = j
+        disp = np.median(state.last_uv[j] - state.ref_uv[j], axis=1)
+        vel = np.median(state.last_vel[j], axis=1)
+    state.neighbours = np.r_[np.where(state.neighbours >= n, n + m, state.neighbours), nb_new]
+    mass, smass = found.meas.mass, found.meas.sigma_mass
+    grow = {  # per new target: (field, value)
+        "ids": found.ids, "ref_uv": uv - disp, "ref_mass": mass, "ref_smass": smass,
+        "last_mass": mass, "last_smass": smass, "radius": found.radius,
+        "spacing": found.spacing, "pred": uv + vel, "last_uv": uv, "last_vel": vel,
+        "timed": np.full(m, bool(k)), "blind": np.zeros(m, np.int64), "since": np.ones(m, np.int64),
+    }  # fmt: skip
+    for name, value in grow.items():
+        old = getattr(state, name)
+        setattr(state, name, np.concatenate([old, np.asarray(value, old.dtype)]))
 
 
 @dataclass(frozen=True)

@@ -10,6 +10,7 @@ rule track_targets:
         frames="results/{test}/frames/{camera}.parquet",
         labels="results/{test}/identify/{camera}/{chunk}.parquet",
         test_yaml=get_test_yaml,
+        kit=get_test_kit,
     output:
         tracks="results/{test}/track/{camera}/{chunk}.parquet",
         handover="results/{test}/track/{camera}/{chunk}_handover.parquet",

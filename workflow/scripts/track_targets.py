@@ -3,7 +3,9 @@
 import yaml
 
 from triaxtrack.codec_lag import lag_corrected
+from triaxtrack.completion import membrane_grid
 from triaxtrack.frames import iter_test_frames, keyframe_test_frames
+from triaxtrack.kit import load_kit_design
 from triaxtrack.logs import log_to
 from triaxtrack.tables import FRAME_MAP, LABELS, TRACKS, read_table, write_table
 from triaxtrack.timesteps import tracking_summary
@@ -18,7 +20,9 @@ fps = float(yaml.safe_load(open(snakemake.input.test_yaml))["fps"])
 camera = snakemake.wildcards.camera
 plan = chunk_frames(labels, fmap, fps, snakemake.params.chunk, cfg, snakemake.input.labels)
 frames = iter_test_frames(snakemake.input.video, fmap, plan.first, plan.end)
-tracks = track_frames(frames, labels, camera, plan.report, cfg)
+membrane = load_kit_design(snakemake.input.kit)["membrane"]
+grid = membrane_grid(membrane) if snakemake.params.tracking["complete_grid"] else None
+tracks = track_frames(frames, labels, camera, plan.report, cfg, grid)
 if snakemake.params.tracking["codec_lag"]:
     keys = keyframe_test_frames(snakemake.input.video, fmap, plan.first, plan.end)
     tracks, lags = lag_corrected(tracks, keys)

@@ -1,0 +1,163 @@
+"""Labelling later from tracked neighbours (the paper's interpolation, section 2.4): a membrane
+dot that was not labelled at a chunk's first frame (hidden by an occluder or a passing shadow,
+cut by a band, or missed by identification) is taken on by the tracker once it can be seen.
+
+Each frame, every such dot of the kit's membrane grid whose grid neighbours within
+``GRID_REACH`` rows and columns are reported on both sides (so its place is interpolated, never
+extrapolated) is predicted by the least-squares affine map of their pixel positions over their
+grid offsets (row, column; columns wrap around the specimen). A prediction is trusted where the
+neighbours fit that map within ``max_fit_px`` (RMS): the grid is locally affine on the image,
+which it is not across a silhouette or a band. The dot's window is measured there
+(:func:`triaxtrack.window.measure_windows`); a blob is its dot where it is clean (not merged,
+lost or at the edge), within the gate of the prediction (``gate`` x its distance to the nearest
+neighbour), no reported target sits within ``min_separation`` of that distance of it, and its
+normalised mass is within ``MASS_RATIO`` of the median reported dot's. A dot that passes in
+``CONFIRM_FRAMES`` measured frames in a row is taken on. Pixels in OpenCV's convention.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numba
+import numpy as np
+from scipy.spatial import cKDTree
+
+from triaxtrack.neighbour_motion import solve3
+from triaxtrack.window import WindowMeasure
+
+GRID_REACH = 2  # grid rows and columns on each side whose dots predict a dot's place
+MIN_GRID_NEIGHBOURS = 6  # reported neighbours needed (at least one on each side in rows and columns)
+MASS_RATIO = 3.0  # a blob whose mass is over this ratio from the median dot's is not a dot (large
+# dots are about 1.6 times the small ones' area: within it; a fragment or a merged pair is not)
+CONFIRM_FRAMES = 2  # measured frames in a row in which a dot must pass before it is taken on
+
+
+def membrane_grid(membrane: dict) -> np.ndarray:
+    """(rows, columns) int64: the ID of the membrane dot in kit row r and column c at
+    ``[r - 1, c - 1]`` (Eq. 4), from a kit design's ``membrane`` section."""
+    rows, columns = int(membrane["rows"]), int(membrane["columns"])
+    return int(membrane["first_id"]) + np.arange(rows * columns, dtype=np.int64).reshape(rows, columns)
+
+
+class Candidates(NamedTuple):
+    """The membrane dots not (yet) followed: their IDs, grid places and how many frames in a
+    row each has passed."""
+
+    ids: np.ndarray  # (m,) int64
+    row: np.ndarray  # (m,) int64, 0-based
+    col: np.ndarray  # (m,) int64, 0-based
+    streak: np.ndarray  # (m,) int64
+
+
+def grid_candidates(grid: np.ndarray, followed: np.ndarray) -> Candidates:
+    """The dots of ``grid`` (:func:`membrane_grid`) whose IDs are not in ``followed``."""
+    row, col = np.nonzero(~np.isin(grid, followed))
+    row, col = row.astype(np.int64), col.astype(np.int64)
+    return Candidates(grid[row, col], row, col, np.zeros(len(row), np.int64))
+
+
+@numba.njit(cache=True)
+def _interpolate(
+    row: np.ndarray, col: np.ndarray, where: np.ndarray, uv: np.ndarray, radius: np.ndarray, reach: int,
+    min_count: int,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
+    """Per candidate: (predicted uv (m, 2), fit RMS (m,), nearest neighbour's distance (m,),
+    largest neighbour radius (m,)); NaN where fewer than ``min_count`` neighbours with a
+    position in ``uv`` (indexed by ``where`` (rows, columns), -1: none) or not on both sides."""
+    m = len(row)
+    rows, cols = where.shape
+    pred = np.full((m, 2), np.nan)
+    rms, near, rad = np.full(m, np.nan), np.full(m, np.nan), np.full(m, np.nan)
+    a, rhs = np.empty((3, 3)), np.empty((3, 2))
+    size = (2 * reach + 1) ** 2
+    du, dv, uu, vv = np.empty(size), np.empty(size), np.empty(size), np.empty(size)
+    for i in range(m):
+        k = 0
+        below = above = left = right = False
+        big = 0.0
+        for dr in range(-reach, reach + 1):
+            r = row[i] + dr
+            if r < 0 or r >= rows:
+                continue
+            for dc in range(-reach, reach + 1):
+                j = where[r, (col[i] + dc) % cols]
+                if (dr == 0 and dc == 0) or j < 0 or not np.isfinite(uv[j, 0]):
+                    continue
+                du[k], dv[k], uu[k], vv[k] = dr, dc, uv[j, 0], uv[j, 1]
+                k += 1
+                below, above, left, right = below or dr > 0, above or dr < 0, left or dc < 0, right or dc > 0
+                big = max(big, radius[j])
+        if k < min_count or not (below and above and left and right):
+            continue
+        sr = sc = srr = src = scc = 0.0
+        su = sv = sru = srv = scu = scv = 0.0
+        for q in range(k):
+            sr, sc, srr, src = sr + du[q], sc + dv[q], srr + du[q] ** 2, src + du[q] * dv[q]
+            scc += dv[q] ** 2
+            su, sv, sru, srv = su + uu[q], sv + vv[q], sru + du[q] * uu[q], srv + du[q] * vv[q]
+            scu, scv = scu + dv[q] * uu[q], scv + dv[q] * vv[q]
+        a[0, 0], a[0, 1], a[0, 2], rhs[0, 0], rhs[0, 1] = srr, src, sr, sru, srv
+        a[1, 0], a[1, 1], a[1, 2], rhs[1, 0], rhs[1, 1] = src, scc, sc, scu, scv
+        a[2, 0], a[2, 1], a[2, 2], rhs[2, 0], rhs[2, 1] = sr, sc, float(k), su, sv
+        solve3(a, rhs)
+        res, dist = 0.0, np.inf
+        for q in range(k):
+            eu = rhs[0, 0] * du[q] + rhs[1, 0] * dv[q] + rhs[2, 0] - uu[q]
+            ev = rhs[0, 1] * du[q] + rhs[1, 1] * dv[q] + rhs[2, 1] - vv[q]
+            res += eu * eu + ev * ev
+            dist = min(dist, np.hypot(uu[q] - rhs[2, 0], vv[q] - rhs[2, 1]))
+        pred[i, 0], pred[i, 1] = rhs[2, 0], rhs[2, 1]
+        rms[i], near[i], rad[i] = np.sqrt(res / k), dist, big
+    return pred, rms, near, rad
+
+
+class Found(NamedTuple):
+    """The candidates taken on in one frame, and their measurement there."""
+
+    ids: np.ndarray  # (k,) int64
+    spacing: np.ndarray  # (k,) distance to the nearest reported neighbour, pixels
+    radius: np.ndarray  # (k,) disc radius, pixels
+    meas: WindowMeasure  # their windows' measurement (k rows)
+
+
+def complete_grid(
+    gray: np.ndarray,
+    cand: Candidates,
+    grid_index: np.ndarray,
+    uv: np.ndarray,
+    radius: np.ndarray,
+    mass: np.ndarray,
+    measure,
+    *,
+    gate: float,
+    min_separation: float,
+    max_fit_px: float,
+) -> tuple[Candidates, Found]:
+    """One frame of completion (module docstring): the candidates with their streaks updated,
+    and the ones taken on. ``grid_index`` (rows, columns): the followed target's row in ``uv``
+    (n, 2: reported centroids this frame, NaN where not), ``radius`` (n,) and ``mass`` (n,:
+    normalised, NaN where not reported) of each dot of the grid, -1 where none; ``measure``:
+    ``(gray, uv (k, 2), radius (k,)) -> WindowMeasure`` (k may be 0)."""
+    pred, rms, near, rad = _interpolate(
+        cand.row, cand.col, grid_index, uv, radius, GRID_REACH, MIN_GRID_NEIGHBOURS
+    )
+    tried = np.isfinite(pred).all(axis=1) & (rms <= max_fit_px)
+    streak = np.where(tried, cand.streak, 0)
+    k = np.nonzero(tried)[0]
+    meas = measure(gray, pred[k], rad[k])
+    ok = (meas.reason == "") & (np.linalg.norm(meas.uv - pred[k], axis=1) <= gate * near[k])
+    reported = uv[np.isfinite(uv).all(axis=1)]
+    if len(reported) and ok.any():
+        d, _ = cKDTree(reported).query(np.nan_to_num(meas.uv))
+        ok &= d >= min_separation * near[k]
+    typical = np.nanmedian(mass) if np.isfinite(mass).any() else np.nan
+    with np.errstate(invalid="ignore", divide="ignore"):
+        ok &= np.abs(np.log(meas.mass / typical)) <= np.log(MASS_RATIO)
+    streak[k] = np.where(ok, streak[k] + 1, 0)
+    sel = ok & (streak[k] >= CONFIRM_FRAMES)
+    take = k[sel]
+    found = Found(cand.ids[take], near[take], rad[take], WindowMeasure(*(a[sel] for a in meas)))
+    keep = np.ones(len(cand.ids), bool)
+    keep[take] = False
+    return Candidates(cand.ids[keep], cand.row[keep], cand.col[keep], streak[keep]), found
