@@ -216,9 +216,40 @@ def test_a_moved_camera_is_found():
         shift = 0.0 if frame < 2 else 0.8  # the camera is knocked between frames 1 and 2
         seen = {"u_px": uv[:, 0] + shift, "v_px": uv[:, 1], "area_px": 9.0, "reason": ""}
         rows.append(pd.DataFrame({"camera": "cam01", "frame": frame, "id": wall["id"], **seen}))
-    motion = camera_motion({"cam01": cam}, wall, pd.concat(rows), moved_px=0.3)
+    motion, poses = camera_motion({"cam01": cam}, wall, pd.concat(rows), moved_px=0.3)
     assert motion["moved"].tolist() == [False, False, True, True]
     assert motion["drift_px"].iloc[0] < 1e-6 and motion["drift_px"].iloc[3] == pytest.approx(0.8, abs=1e-6)
+    # a pixel shift of 0.8 px is a small turn of the camera: it is posed again at frames 2 and 3
+    assert motion["reposed"].tolist() == [False, False, True, True]
+    assert set(poses) == {("cam01", 2), ("cam01", 3)}
+    moved = project_air(poses[("cam01", 2)], wall[["x_mm", "y_mm", "z_mm"]].to_numpy())
+    assert np.abs(moved - np.c_[uv[:, 0] + 0.8, uv[:, 1]]).max() < 0.05
+
+
+def test_a_knocked_camera_is_posed_again_from_its_cell_wall_targets():
+    """A camera turned by 0.3 degrees and moved by 1 mm from frame 2 on: its new pose is found
+    from the tracked cell-wall targets (centre within 0.05 mm); with too few targets it is not,
+    and the frame is left out as before."""
+    K = np.array([[800.0, 0, 320], [0, 800, 240], [0, 0, 1]])
+    dist = np.array([-0.2, 0.05, 0, 0, 0])
+    cam = Camera("cam01", 640, 480, K, dist, np.eye(3), np.array([0.0, 0.0, 300.0]))
+    knocked = cv2.Rodrigues(np.radians([0.3, -0.2, 0.1]))[0]
+    bumped = Camera("cam01", 640, 480, K, cam.dist, knocked, np.array([1.0, -0.5, 300.5]))
+    rng = np.random.default_rng(3)
+    xyz = rng.uniform(-60, 60, (40, 3))
+    wall = pd.DataFrame(xyz, columns=["x_mm", "y_mm", "z_mm"]).assign(id=np.arange(101, 141))
+    rows = []
+    for f in range(4):
+        uv = project_air(cam if f < 2 else bumped, xyz)
+        rows.append(pd.DataFrame({"camera": "cam01", "frame": f, "id": wall["id"], "u_px": uv[:, 0],
+                                  "v_px": uv[:, 1], "area_px": 9.0, "reason": ""}))  # fmt: skip
+    motion, poses = camera_motion({"cam01": cam}, wall, pd.concat(rows), moved_px=0.3)
+    assert motion["moved"].tolist() == motion["reposed"].tolist() == [False, False, True, True]
+    assert np.linalg.norm(poses[("cam01", 3)].center - bumped.center) < 0.05
+    few = pd.concat(rows).groupby("frame").head(8)  # fewer than MIN_REPOSE_TARGETS tracked
+    motion, poses = camera_motion({"cam01": cam}, wall, few, moved_px=0.3)
+    assert motion["moved"].tolist() == [False, False, True, True]
+    assert not motion["reposed"].any() and not poses
 
 
 @pytest.mark.parametrize("speed", [3.0, 8.0])

@@ -4,8 +4,10 @@ The cameras and the cell are those of the first frame (``triaxtrack.sfm``,
 ``triaxtrack.triangulate``); they are assumed fixed for the whole test, and that is checked:
 the cell-wall targets do not move, so each camera's tracked cell-wall targets must stay on the
 projections of their first-frame 3-D points. A camera whose median drift exceeds
-``moved_px`` at a frame is reported as moved, and its observations of that frame are left out
-of the triangulation (reason ``camera moved``).
+``moved_px`` at a frame is reported as moved (knocked, or its mount settled), and posed again
+at that frame from those targets (PnP in air, at least ``MIN_REPOSE_TARGETS`` of them, their
+median reprojection then within ``moved_px``: ``reposed``); where it cannot be, its
+observations of that frame are left out of the triangulation (reason ``camera moved``).
 
 Chunks are tracked independently (``triaxtrack.track``); neighbouring chunks share one frame, at
 which the IDs carried to the end of one chunk are compared with the labels of the next
@@ -20,38 +22,61 @@ import numpy as np
 import pandas as pd
 
 from triaxtrack.optics import Camera, CellOptics, project_air
+from triaxtrack.refractive_pose import pnp_pose
 from triaxtrack.tables import Schema
 from triaxtrack.triangulate import TriangulationConfig, triangulate_refracted
 
 MOVED_PX = 0.3  # default: a camera whose cell-wall targets drift by more (median) has moved
 MIN_WALL_TARGETS = 5  # fewer tracked cell-wall targets in a frame: the camera cannot be checked
+MIN_REPOSE_TARGETS = 12  # cell-wall targets a moved camera is posed again from (as the first frame's PnP)
+REPOSE_RANSAC_PX = 2.0  # PnP inlier threshold, pixels (reconstruction.ransac_px's default)
 
 
 def camera_motion(
     cameras: dict[str, Camera], wall_points: pd.DataFrame, tracks: pd.DataFrame, moved_px: float = MOVED_PX
-) -> pd.DataFrame:
+) -> tuple[pd.DataFrame, dict[tuple[str, int], Camera]]:
     """Per camera and frame: the median distance (pixels) of the tracked cell-wall targets from
-    the projections of their first-frame points, and whether the camera has moved.
+    the projections of their first-frame points, whether the camera has moved, and whether it
+    was posed again there; and those poses.
 
     ``wall_points``: ``id, x_mm, y_mm, z_mm`` of the cell-wall targets (cell frame, in air);
-    ``tracks``: ``TRACKS`` rows (only reported ones, ``reason == ''``, count). Returns columns
-    ``camera, frame, wall_targets, drift_px, moved``; ``drift_px`` NaN (and ``moved`` False)
-    with fewer than ``MIN_WALL_TARGETS`` targets.
+    ``tracks``: ``TRACKS`` rows (only reported ones, ``reason == ''``, count). Returns
+    (``MOTION`` rows: ``camera, frame, wall_targets, drift_px, moved, reposed``, ``drift_px``
+    NaN and ``moved`` False with fewer than ``MIN_WALL_TARGETS`` targets; ``{(camera, frame):
+    the camera posed again}`` for the moved camera-frames it could be posed in, module
+    docstring).
     """
     rep = tracks[(tracks["reason"] == "") & tracks["id"].isin(wall_points["id"])]
-    xyz = wall_points.set_index("id")[["x_mm", "y_mm", "z_mm"]]
-    rows = []
+    xyz_all = wall_points.set_index("id")[["x_mm", "y_mm", "z_mm"]]
+    rows, poses = [], {}
     for (name, frame), g in rep.groupby(["camera", "frame"], sort=True):
         if name not in cameras:
             continue
-        uv = project_air(cameras[name], xyz.loc[g["id"]].to_numpy(np.float64))
-        d = np.hypot(*(uv - g[["u_px", "v_px"]].to_numpy(np.float64)).T)
+        xyz, seen = xyz_all.loc[g["id"]].to_numpy(np.float64), g[["u_px", "v_px"]].to_numpy(np.float64)
+        d = np.hypot(*(project_air(cameras[name], xyz) - seen).T)
         d = d[np.isfinite(d)]
         drift = float(np.median(d)) if len(d) >= MIN_WALL_TARGETS else float("nan")
+        moved = bool(drift > moved_px)
+        pose = _posed_again(cameras[name], xyz, seen, moved_px) if moved else None
+        if pose is not None:
+            poses[(str(name), int(frame))] = pose
         rows.append({"camera": name, "frame": int(frame), "wall_targets": int(len(d)), "drift_px": drift,
-                     "moved": bool(drift > moved_px)})  # fmt: skip
-    cols = ["camera", "frame", "wall_targets", "drift_px", "moved"]
-    return pd.DataFrame(rows, columns=cols)
+                     "moved": moved, "reposed": pose is not None})  # fmt: skip
+    return pd.DataFrame(rows, columns=list(MOTION.columns)), poses
+
+
+def _posed_again(camera: Camera, xyz: np.ndarray, uv: np.ndarray, moved_px: float) -> Camera | None:
+    """``camera`` posed by PnP on its cell-wall targets (:func:`triaxtrack.refractive_pose.pnp_pose`)
+    where at least ``MIN_REPOSE_TARGETS`` are inliers and their median reprojection is within
+    ``moved_px``; else None."""
+    if len(xyz) < MIN_REPOSE_TARGETS:
+        return None
+    posed = pnp_pose(camera, xyz, uv, REPOSE_RANSAC_PX)
+    if posed is None or posed[1].sum() < MIN_REPOSE_TARGETS:
+        return None
+    cam, inlier = posed
+    residual = np.hypot(*(project_air(cam, xyz[inlier]) - uv[inlier]).T)
+    return cam if float(np.median(residual)) <= moved_px else None
 
 
 def triangulate_frames(
@@ -63,27 +88,31 @@ def triangulate_frames(
     fps: float,
     cfg: TriangulationConfig,
     motion: pd.DataFrame | None = None,
+    poses: dict[tuple[str, int], Camera] | None = None,
 ) -> tuple[pd.DataFrame, pd.DataFrame]:
     """Refractive triangulation of the tracked targets in the water, frame by frame.
 
     ``tracks``: ``TRACKS`` rows of every camera (reported ones are used); ``in_water``: IDs of
-    the pedestal and membrane targets; ``frames``: the frames to solve; ``motion``:
-    :func:`camera_motion` (a moved camera's observations of a frame are left out). Returns
+    the pedestal and membrane targets; ``frames``: the frames to solve; ``motion`` and
+    ``poses``: :func:`camera_motion` (a moved camera is taken in its new pose where it was
+    posed again, and its observations of that frame are left out where not). Returns
     ``(points, residuals)``: ``POINTS`` rows plus ``sigma_mm``, and ``RESIDUALS`` rows (every
     observation offered, whether it was used and why not).
     """
     rep = tracks[(tracks["reason"] == "") & tracks["id"].isin(in_water) & tracks["frame"].isin(frames)]
+    poses = poses or {}
     moved = set()
     if motion is not None and len(motion):
         m = motion[motion["moved"]]
-        moved = set(zip(m["camera"], m["frame"], strict=True))
+        moved = set(zip(m["camera"], m["frame"], strict=True)) - set(poses)
     points, residuals = [], []
     for frame in np.sort(np.asarray(frames)):
         obs = rep[rep["frame"] == frame][["camera", "frame", "id", "u_px", "v_px"]].reset_index(drop=True)
         if len(obs) == 0:
             continue
         off = np.array([(c, int(frame)) in moved for c in obs["camera"]], bool)
-        res = triangulate_refracted(cameras, obs[~off], cell, cfg)
+        posed = {name: cam for (name, f), cam in poses.items() if f == frame}
+        res = triangulate_refracted({**cameras, **posed}, obs[~off], cell, cfg)
         points.append(res.points.assign(frame=int(frame), time_s=float(frame) / fps))
         dropped = obs[off].assign(du_px=np.nan, dv_px=np.nan, used=False, reason="camera moved")
         residuals.append(pd.concat([res.residuals, dropped], ignore_index=True))
@@ -143,11 +172,13 @@ def tracking_summary(tracks: pd.DataFrame) -> pd.DataFrame:
 
 MOTION = Schema(
     "camera_motion",
-    {"camera": "object", "frame": "int64", "wall_targets": "int64", "drift_px": "float64", "moved": "bool"},
+    {"camera": "object", "frame": "int64", "wall_targets": "int64", "drift_px": "float64", "moved": "bool",
+     "reposed": "bool"},
     ("camera", "frame"),
-)
+)  # fmt: skip
 """Per camera and frame (:func:`camera_motion`): tracked cell-wall targets, their median distance
-from the projections of their first-frame points, and whether the camera has moved."""
+from the projections of their first-frame points, whether the camera has moved, and whether it
+was posed again there."""
 
 
 def timestep_quality(
@@ -198,6 +229,8 @@ def timestep_quality(
     mem1 = set(points.loc[(points["frame"] == last) & points["id"].isin(membrane_ids), "id"])
     losses = tracks.loc[tracks["reason"] != "", "reason"].value_counts()
     moved = motion[motion["moved"].astype(bool)]
+    reposed = moved["reposed"].astype(bool).groupby(moved["camera"]).sum()
+    left_out = moved["camera"].value_counts() - reposed
     return {
         **{k: v for k, v in reference.items() if k not in ("per_camera", "frames", "mean_reprojection_px")},
         "mean_reprojection_px": float(err.mean()) if len(err) else float("nan"),
@@ -224,6 +257,8 @@ def timestep_quality(
                 str(c): float(g.max()) for c, g in motion.groupby("camera")["drift_px"]
             },
             "moved": {str(c): int(g["frame"].min()) for c, g in moved.groupby("camera")},
+            "reposed_frames": {str(c): int(n) for c, n in reposed.items()},
+            "left_out_frames": {str(c): int(n) for c, n in left_out.items()},
         },
         "handovers": {
             "checked": len(handovers),

@@ -28,12 +28,12 @@ tracks = concat_tables(snakemake.input.tracks, TRACKS)
 reference = read_table(snakemake.input.points, POINTS)
 wall = reference[reference["id"].isin(table.loc[table["surface"] == "cell_outer", "id"])]
 moved_px = snakemake.params.tracking["moved_px"]
-motion = camera_motion(cameras, wall, tracks, moved_px)
+motion, poses = camera_motion(cameras, wall, tracks, moved_px)
 in_water = table.loc[table["surface"] != "cell_outer", "id"].to_numpy()
 frames = np.unique(tracks["frame"].to_numpy())
 points, residuals = triangulate_frames(
     cameras, tracks, cell, in_water, frames, fps,
-    TriangulationConfig.from_dict(snakemake.params.reconstruction), motion,
+    TriangulationConfig.from_dict(snakemake.params.reconstruction), motion, poses,
 )  # fmt: skip
 write_table(points, snakemake.output.points, POINTS)
 write_table(residuals, snakemake.output.residuals, RESIDUALS)
@@ -42,5 +42,6 @@ print(f"{len(frames)} frames, {len(points)} points, {int(residuals['used'].sum()
 print(points.groupby("frame").size().describe().to_string())
 moved = motion[motion["moved"]]
 if len(moved):
-    print(f"cameras moved (cell-wall drift above {moved_px} px): {sorted(set(moved['camera']))}")
+    print(f"cameras moved (cell-wall drift above {moved_px} px): {sorted(set(moved['camera']))}, "
+          f"posed again at {int(moved['reposed'].sum())} of their {len(moved)} frames")  # fmt: skip
 print(f"largest cell-wall drift: {motion['drift_px'].max():.3f} px")
