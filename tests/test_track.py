@@ -6,6 +6,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from triaxtrack.completion import MembraneGrid
 from triaxtrack.detect import detect_blobs
 from triaxtrack.optics import Camera, project_air
 from triaxtrack.timesteps import camera_motion, handover_check, large_losses, tracking_summary
@@ -113,7 +114,7 @@ def test_dots_hidden_at_the_labelled_frame_are_taken_on_once_seen():
     taken on from their reported neighbours once the bar has passed, each its own dot; without
     it they are never followed."""
     ids, uv = truth_positions(0)
-    grid = ids.reshape(14, 28)
+    grid = MembraneGrid(ids.reshape(14, 28), aspect=1.0)  # a square grid seen face on
     frames = [(k, render(k)) for k in range(FRAMES)]
     tracks = track_frames(frames, first_labels(), "cam01", range(FRAMES), grid=grid)
     labelled = set(first_labels()["id"])
@@ -122,8 +123,8 @@ def test_dots_hidden_at_the_labelled_frame_are_taken_on_once_seen():
     assert len(hidden) >= 14  # a column of the grid at least
     a, b = bar_columns(FRAMES - 1)
     ids29, uv29 = truth_positions(FRAMES - 1)
-    row = (ids29 - ids29.min()) // grid.shape[1]
-    inner = (row > 0) & (row < grid.shape[0] - 1)  # between rows (interpolated, never extrapolated)
+    row = (ids29 - ids29.min()) // grid.ids.shape[1]
+    inner = (row > 0) & (row < grid.ids.shape[0] - 1)  # between rows (interpolated, never extrapolated)
     clear = set(ids29[inner & ((uv29[:, 0] < a - 4) | (uv29[:, 0] > b + 4))])
     rep = tracks[tracks["reason"] == ""]
     last = set(rep.loc[rep["frame"] == FRAMES - 1, "id"])

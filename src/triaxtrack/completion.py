@@ -2,12 +2,15 @@
 dot that was not labelled at a chunk's first frame (hidden by an occluder or a passing shadow,
 cut by a band, or missed by identification) is taken on by the tracker once it can be seen.
 
-Each frame, every such dot of the kit's membrane grid whose grid neighbours within
-``GRID_REACH`` rows and columns are reported on both sides (so its place is interpolated, never
-extrapolated) is predicted by the least-squares affine map of their pixel positions over their
-grid offsets (row, column; columns wrap around the specimen). A prediction is trusted where the
+Each frame, every such dot of the kit's membrane grid (but for its end rows) whose grid
+neighbours within ``GRID_REACH`` rows and columns are reported in columns on both sides and in
+rows on both sides, or in the next two rows on one side (a band is filled row by row from its
+edges), is predicted by the least-squares affine map of their pixel positions over their grid
+offsets (row, column; columns wrap around the specimen). A prediction is trusted where the
 neighbours fit that map within ``max_fit_px`` (RMS): the grid is locally affine on the image,
-which it is not across a silhouette or a band. The dot's window is measured there
+which it is not across a band; and where the dot is seen within 60 degrees of face on
+(``MIN_VIEW_COS``: the fitted column step over the row step against the kit's pitches; near a
+silhouette a centroid is biased and the columns crowd). The dot's window is measured there
 (:func:`triaxtrack.window.measure_windows`); a blob is its dot where it is clean (not merged,
 lost or at the edge), within the gate of the prediction (``gate`` x its distance to the nearest
 neighbour), no reported target sits within ``min_separation`` of that distance of it, and its
@@ -23,6 +26,7 @@ import numba
 import numpy as np
 from scipy.spatial import cKDTree
 
+from triaxtrack.kit import membrane_radius
 from triaxtrack.neighbour_motion import solve3
 from triaxtrack.window import WindowMeasure
 
@@ -31,13 +35,27 @@ MIN_GRID_NEIGHBOURS = 6  # reported neighbours needed (at least one on each side
 MASS_RATIO = 3.0  # a blob whose mass is over this ratio from the median dot's is not a dot (large
 # dots are about 1.6 times the small ones' area: within it; a fragment or a merged pair is not)
 CONFIRM_FRAMES = 2  # measured frames in a row in which a dot must pass before it is taken on
+MIN_VIEW_COS = 0.5  # a dot seen more obliquely than 60 degrees (its image squeezed across the
+# columns to half) is not taken on: its centroid is biased there and its neighbours crowd it
 
 
-def membrane_grid(membrane: dict) -> np.ndarray:
-    """(rows, columns) int64: the ID of the membrane dot in kit row r and column c at
-    ``[r - 1, c - 1]`` (Eq. 4), from a kit design's ``membrane`` section."""
-    rows, columns = int(membrane["rows"]), int(membrane["columns"])
-    return int(membrane["first_id"]) + np.arange(rows * columns, dtype=np.int64).reshape(rows, columns)
+class MembraneGrid(NamedTuple):
+    """The kit's membrane grid: ``ids`` (rows, columns) int64, the ID of the dot in kit row r and
+    column c at ``[r - 1, c - 1]`` (Eq. 4); ``aspect`` its column pitch over its row pitch on the
+    undeformed membrane (a dot's image is foreshortened across the columns by the cosine of
+    its view angle, so the image's column step over its row step is ``aspect`` times that)."""
+
+    ids: np.ndarray
+    aspect: float
+
+
+def membrane_grid(design: dict) -> MembraneGrid:
+    """The :class:`MembraneGrid` of a kit design (``membrane`` and ``specimen`` sections)."""
+    m = design["membrane"]
+    rows, columns = int(m["rows"]), int(m["columns"])
+    ids = int(m["first_id"]) + np.arange(rows * columns, dtype=np.int64).reshape(rows, columns)
+    aspect = (2 * np.pi * membrane_radius(design) / columns) / (design["specimen"]["height"] / rows)
+    return MembraneGrid(ids, float(aspect))
 
 
 class Candidates(NamedTuple):
@@ -51,8 +69,11 @@ class Candidates(NamedTuple):
 
 
 def grid_candidates(grid: np.ndarray, followed: np.ndarray) -> Candidates:
-    """The dots of ``grid`` (:func:`membrane_grid`) whose IDs are not in ``followed``."""
-    row, col = np.nonzero(~np.isin(grid, followed))
+    """The dots of ``grid`` (:func:`membrane_grid`) whose IDs are not in ``followed``, but for
+    its end rows (beside the pedestals' dark faces, which a blurred dot merges with)."""
+    inner = np.zeros(grid.shape, bool)
+    inner[1:-1] = True
+    row, col = np.nonzero(inner & ~np.isin(grid, followed))
     row, col = row.astype(np.int64), col.astype(np.int64)
     return Candidates(grid[row, col], row, col, np.zeros(len(row), np.int64))
 
@@ -61,20 +82,22 @@ def grid_candidates(grid: np.ndarray, followed: np.ndarray) -> Candidates:
 def _interpolate(
     row: np.ndarray, col: np.ndarray, where: np.ndarray, uv: np.ndarray, radius: np.ndarray, reach: int,
     min_count: int,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
     """Per candidate: (predicted uv (m, 2), fit RMS (m,), nearest neighbour's distance (m,),
-    largest neighbour radius (m,)); NaN where fewer than ``min_count`` neighbours with a
-    position in ``uv`` (indexed by ``where`` (rows, columns), -1: none) or not on both sides."""
+    largest neighbour radius (m,), the fitted column step's length over the row step's (m,));
+    NaN where fewer than ``min_count`` neighbours with a position in ``uv`` (indexed by
+    ``where`` (rows, columns), -1: none), or not placed as the module docstring says."""
     m = len(row)
     rows, cols = where.shape
     pred = np.full((m, 2), np.nan)
-    rms, near, rad = np.full(m, np.nan), np.full(m, np.nan), np.full(m, np.nan)
+    rms, near, rad, squeeze = np.full(m, np.nan), np.full(m, np.nan), np.full(m, np.nan), np.full(m, np.nan)
     a, rhs = np.empty((3, 3)), np.empty((3, 2))
     size = (2 * reach + 1) ** 2
     du, dv, uu, vv = np.empty(size), np.empty(size), np.empty(size), np.empty(size)
     for i in range(m):
         k = 0
-        below = above = left = right = False
+        side = np.zeros(2 * reach + 1, np.int64)  # reported dots per row offset
+        left = right = False  # a reported dot in the columns on each side
         big = 0.0
         for dr in range(-reach, reach + 1):
             r = row[i] + dr
@@ -86,9 +109,16 @@ def _interpolate(
                     continue
                 du[k], dv[k], uu[k], vv[k] = dr, dc, uv[j, 0], uv[j, 1]
                 k += 1
-                below, above, left, right = below or dr > 0, above or dr < 0, left or dc < 0, right or dc > 0
+                side[dr + reach] += 1
+                left, right = left or dc < 0, right or dc > 0
                 big = max(big, radius[j])
-        if k < min_count or not (below and above and left and right):
+        above, below = side[:reach].sum() > 0, side[reach + 1 :].sum() > 0
+        # rows: between reported rows, or the next row beyond two reported ones (a band is filled
+        # row by row from its edges); columns: between reported ones
+        rows_ok = (above and below) or (side[reach - 1] > 0 and side[reach - 2] > 0) or (
+            side[reach + 1] > 0 and side[reach + 2] > 0
+        )
+        if k < min_count or not (rows_ok and left and right):
             continue
         sr = sc = srr = src = scc = 0.0
         su = sv = sru = srv = scu = scv = 0.0
@@ -109,7 +139,8 @@ def _interpolate(
             dist = min(dist, np.hypot(uu[q] - rhs[2, 0], vv[q] - rhs[2, 1]))
         pred[i, 0], pred[i, 1] = rhs[2, 0], rhs[2, 1]
         rms[i], near[i], rad[i] = np.sqrt(res / k), dist, big
-    return pred, rms, near, rad
+        squeeze[i] = np.hypot(rhs[1, 0], rhs[1, 1]) / np.hypot(rhs[0, 0], rhs[0, 1])
+    return pred, rms, near, rad, squeeze
 
 
 class Found(NamedTuple):
@@ -130,6 +161,7 @@ def complete_grid(
     mass: np.ndarray,
     measure,
     *,
+    aspect: float,
     gate: float,
     min_separation: float,
     max_fit_px: float,
@@ -138,11 +170,12 @@ def complete_grid(
     and the ones taken on. ``grid_index`` (rows, columns): the followed target's row in ``uv``
     (n, 2: reported centroids this frame, NaN where not), ``radius`` (n,) and ``mass`` (n,:
     normalised, NaN where not reported) of each dot of the grid, -1 where none; ``measure``:
-    ``(gray, uv (k, 2), radius (k,)) -> WindowMeasure`` (k may be 0)."""
-    pred, rms, near, rad = _interpolate(
+    ``(gray, uv (k, 2), radius (k,)) -> WindowMeasure`` (k may be 0); ``aspect``: the grid's
+    (:class:`MembraneGrid`)."""
+    pred, rms, near, rad, squeeze = _interpolate(
         cand.row, cand.col, grid_index, uv, radius, GRID_REACH, MIN_GRID_NEIGHBOURS
     )
-    tried = np.isfinite(pred).all(axis=1) & (rms <= max_fit_px)
+    tried = np.isfinite(pred).all(axis=1) & (rms <= max_fit_px) & (squeeze >= MIN_VIEW_COS * aspect)
     streak = np.where(tried, cand.streak, 0)
     k = np.nonzero(tried)[0]
     meas = measure(gray, pred[k], rad[k])

@@ -73,7 +73,7 @@ import numpy as np
 import pandas as pd
 from scipy.spatial import cKDTree
 
-from triaxtrack.completion import Candidates, Found, complete_grid, grid_candidates
+from triaxtrack.completion import Candidates, Found, MembraneGrid, complete_grid, grid_candidates
 from triaxtrack.detect import DetectParams
 from triaxtrack.neighbour_motion import affine_flow, unwrap_motion
 from triaxtrack.window import WindowMeasure, measure_windows
@@ -421,7 +421,7 @@ def track_frames(
     camera: str,
     report: Collection[int],
     cfg: TrackingConfig | None = None,
-    grid: np.ndarray | None = None,
+    grid: MembraneGrid | None = None,
 ) -> pd.DataFrame:
     """Follow the labelled targets of ``labels`` (one camera's frame, ``LABELS`` columns; the
     unlabelled detections, id -1, only set each target's spacing) through ``frames``
@@ -437,7 +437,7 @@ def track_frames(
     """
     cfg = cfg or TrackingConfig()
     state = _init_state(labels, cfg)
-    cand = grid_candidates(grid, state.ids) if grid is not None else None
+    cand = grid_candidates(grid.ids, state.ids) if grid is not None else None
     report = set(int(k) for k in report)
     parts: list[tuple] = []
     for i, (k, gray) in enumerate(frames):
@@ -466,19 +466,20 @@ def track_frames(
 
 
 def _complete(
-    state: _State, gray: np.ndarray, cand: Candidates, grid: np.ndarray, uv: np.ndarray, cfg: TrackingConfig
+    state: _State, gray: np.ndarray, cand: Candidates, grid: MembraneGrid, uv: np.ndarray, cfg: TrackingConfig
 ) -> tuple[Candidates, Found]:
     """One frame of :func:`triaxtrack.completion.complete_grid` from the targets reported in it
     (``uv`` (n, 2), NaN where not), the dots taken on added to ``state`` (:func:`_adopt`)."""
-    flat = state.ids - grid.flat[0]
-    member = (flat >= 0) & (flat < grid.size)
-    index = np.full(grid.size, -1, np.int64)
+    flat = state.ids - grid.ids.flat[0]
+    member = (flat >= 0) & (flat < grid.ids.size)
+    index = np.full(grid.ids.size, -1, np.int64)
     index[flat[member]] = np.nonzero(member)[0]
     reported = np.isfinite(uv).all(axis=1)
+    mass = np.where(reported, state.last_mass, np.nan)
     cand, found = complete_grid(
-        gray, cand, index.reshape(grid.shape), uv, state.radius, np.where(reported, state.last_mass, np.nan),
-        lambda g, p, r: measure_targets(g, p, r, cfg), gate=cfg.gate, min_separation=cfg.min_separation,
-        max_fit_px=cfg.max_flow_residual_px,
+        gray, cand, index.reshape(grid.ids.shape), uv, state.radius, mass,
+        lambda g, p, r: measure_targets(g, p, r, cfg), aspect=grid.aspect, gate=cfg.gate,
+        min_separation=cfg.min_separation, max_fit_px=cfg.max_flow_residual_px,
     )  # fmt: skip
     if len(found.ids):
         _adopt(state, found, reported)

@@ -20,8 +20,8 @@ fps = float(yaml.safe_load(open(snakemake.input.test_yaml))["fps"])
 camera = snakemake.wildcards.camera
 plan = chunk_frames(labels, fmap, fps, snakemake.params.chunk, cfg, snakemake.input.labels)
 frames = iter_test_frames(snakemake.input.video, fmap, plan.first, plan.end)
-membrane = load_kit_design(snakemake.input.kit)["membrane"]
-grid = membrane_grid(membrane) if snakemake.params.tracking["complete_grid"] else None
+complete = snakemake.params.tracking["complete_grid"]
+grid = membrane_grid(load_kit_design(snakemake.input.kit)) if complete else None
 tracks = track_frames(frames, labels, camera, plan.report, cfg, grid)
 if snakemake.params.tracking["codec_lag"]:
     keys = keyframe_test_frames(snakemake.input.video, fmap, plan.first, plan.end)
