@@ -8,7 +8,8 @@ rows on both sides, or in the next two rows on one side (a band is filled row by
 edges), is predicted by the least-squares affine map of their pixel positions over their grid
 offsets (row, column; columns wrap around the specimen). A prediction is trusted where the
 neighbours fit that map within ``max_fit_px`` (RMS): the grid is locally affine on the image,
-which it is not across a band; and where the dot is seen within 60 degrees of face on
+which it is not across a band; where no cell-wall target is reported within ``BAND_REACH``
+spacings (a cell band's edge would cut its image); and where the dot is seen within 60 degrees of face on
 (``MIN_VIEW_COS``: the fitted column step over the row step against the kit's pitches; near a
 silhouette a centroid is biased and the columns crowd). The dot's window is measured there
 (:func:`triaxtrack.window.measure_windows`); a blob is its dot where it is clean (not merged,
@@ -35,6 +36,8 @@ MIN_GRID_NEIGHBOURS = 6  # reported neighbours needed (at least one on each side
 MASS_RATIO = 3.0  # a blob whose mass is over this ratio from the median dot's is not a dot (large
 # dots are about 1.6 times the small ones' area: within it; a fragment or a merged pair is not)
 CONFIRM_FRAMES = 2  # measured frames in a row in which a dot must pass before it is taken on
+BAND_REACH = 2.0  # x its spacing: a dot this near a cell-wall target is beside (or behind) a cell
+# band, whose edge cuts its image: identification, which knows the bands, labels it or not
 MIN_VIEW_COS = 0.5  # a dot seen more obliquely than 60 degrees (its image squeezed across the
 # columns to half) is not taken on: its centroid is biased there and its neighbours crowd it
 
@@ -165,17 +168,21 @@ def complete_grid(
     gate: float,
     min_separation: float,
     max_fit_px: float,
+    cell_uv: np.ndarray | None = None,
 ) -> tuple[Candidates, Found]:
     """One frame of completion (module docstring): the candidates with their streaks updated,
     and the ones taken on. ``grid_index`` (rows, columns): the followed target's row in ``uv``
     (n, 2: reported centroids this frame, NaN where not), ``radius`` (n,) and ``mass`` (n,:
     normalised, NaN where not reported) of each dot of the grid, -1 where none; ``measure``:
     ``(gray, uv (k, 2), radius (k,)) -> WindowMeasure`` (k may be 0); ``aspect``: the grid's
-    (:class:`MembraneGrid`)."""
+    (:class:`MembraneGrid`); ``cell_uv`` (c, 2): the cell-wall targets reported this frame."""
     pred, rms, near, rad, squeeze = _interpolate(
         cand.row, cand.col, grid_index, uv, radius, GRID_REACH, MIN_GRID_NEIGHBOURS
     )
     tried = np.isfinite(pred).all(axis=1) & (rms <= max_fit_px) & (squeeze >= MIN_VIEW_COS * aspect)
+    if cell_uv is not None and len(cell_uv) and tried.any():  # not beside a cell band
+        d, _ = cKDTree(cell_uv).query(np.nan_to_num(pred))
+        tried &= d > BAND_REACH * near
     streak = np.where(tried, cand.streak, 0)
     k = np.nonzero(tried)[0]
     meas = measure(gray, pred[k], rad[k])

@@ -130,7 +130,7 @@ def processed_frames(n_frames: int, fps: float, step_s: float | None) -> np.ndar
     return np.unique(np.r_[k[k < n_frames], n_frames - 1])
 
 
-MEMBRANE = 3  # target_kind of a membrane dot
+CELL_WALL, MEMBRANE = 2, 3  # target_kind of a cell-wall target and of a membrane dot
 
 
 def target_kind(ids: np.ndarray) -> np.ndarray:
@@ -480,6 +480,7 @@ def _complete(
         gray, cand, index.reshape(grid.ids.shape), uv, state.radius, mass,
         lambda g, p, r: measure_targets(g, p, r, cfg), aspect=grid.aspect, gate=cfg.gate,
         min_separation=cfg.min_separation, max_fit_px=cfg.max_flow_residual_px,
+        cell_uv=uv[reported & (target_kind(state.ids) == CELL_WALL)],
     )  # fmt: skip
     if len(found.ids):
         _adopt(state, found, reported)
