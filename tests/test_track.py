@@ -136,6 +136,38 @@ def test_dots_hidden_at_the_labelled_frame_are_taken_on_once_seen():
     assert not (set(plain["id"]) & hidden)
 
 
+def test_a_band_of_rows_hidden_at_the_labelled_frame_is_filled_row_by_row(monkeypatch):
+    """Four rows under a strap for the first frames (wider than the neighbours that interpolate a
+    dot reach): once it is gone they are taken on from their edges inward, each its own dot."""
+    import sys
+
+    here = sys.modules[__name__]
+    monkeypatch.setattr(here, "bar_columns", lambda frame: (W + 10.0, W + 20.0))  # no bar
+    ids, uv0 = truth_positions(0)
+    rows = (ids - ids.min()) // 28
+    strap = (rows >= 5) & (rows <= 8)
+    top, bottom = uv0[rows == 4, 1].max() + 4, uv0[rows == 9, 1].min() - 4
+
+    def frame(k):
+        img = render(k)
+        if k < 3:
+            img[int(top) : int(bottom) + 1] = 220
+        return k, img
+
+    frames = [frame(k) for k in range(12)]
+    labels = first_labels()
+    labels = labels.assign(id=np.where(labels["id"].isin(ids[strap]), -1, labels["id"]))  # as the strap left them
+    grid = MembraneGrid(ids.reshape(14, 28), aspect=1.0)
+    tracks = track_frames(frames, labels, "cam01", range(12), grid=grid)
+    rep = tracks[tracks["reason"] == ""]
+    last = set(rep.loc[rep["frame"] == 11, "id"])
+    inside = set(ids[strap & (uv0[:, 0] > 50) & (uv0[:, 0] < 300)])  # columns between seen ones
+    assert len(inside & last) >= 0.95 * len(inside)
+    for k, g in rep[rep["id"].isin(ids[strap])].groupby("frame"):
+        true = pd.DataFrame(truth_positions(k)[1], index=ids, columns=["u", "v"]).loc[g["id"]]
+        assert np.hypot(*(g[["u_px", "v_px"]].to_numpy() - true.to_numpy()).T).max() < 0.5, k
+
+
 def test_missing_frame_is_not_recorded_and_tracking_continues(tracked):
     f12 = tracked[tracked["frame"] == 12]
     assert (f12["reason"] == "not_recorded").all()
