@@ -156,7 +156,8 @@ def test_a_band_of_rows_hidden_at_the_labelled_frame_is_filled_row_by_row(monkey
 
     frames = [frame(k) for k in range(12)]
     labels = first_labels()
-    labels = labels.assign(id=np.where(labels["id"].isin(ids[strap]), -1, labels["id"]))  # as the strap left them
+    # unlabelled, as the strap left them
+    labels = labels.assign(id=np.where(labels["id"].isin(ids[strap]), -1, labels["id"]))
     grid = MembraneGrid(ids.reshape(14, 28), aspect=1.0)
     tracks = track_frames(frames, labels, "cam01", range(12), grid=grid)
     rep = tracks[tracks["reason"] == ""]
