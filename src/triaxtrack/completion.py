@@ -72,11 +72,20 @@ class Candidates(NamedTuple):
 
 
 def grid_candidates(grid: np.ndarray, followed: np.ndarray) -> Candidates:
-    """The dots of ``grid`` (:func:`membrane_grid`) whose IDs are not in ``followed``, but for
-    its end rows (beside the pedestals' dark faces, which a blurred dot merges with)."""
+    """The dots of ``grid`` (:func:`membrane_grid` ``ids``) whose IDs are not in ``followed`` but
+    with at least ``MIN_GRID_NEIGHBOURS`` followed ones within ``GRID_REACH`` rows and columns
+    (the others cannot be placed; columns wrap around), but for its end rows (beside the
+    pedestals' dark faces, which a blurred dot merges with)."""
+    seen = np.isin(grid, followed)
+    padded = np.pad(seen, ((GRID_REACH, GRID_REACH), (0, 0))).astype(np.int64)
+    near = -seen.astype(np.int64)  # the dot itself is not its own neighbour
+    for dr in range(2 * GRID_REACH + 1):
+        rows = padded[dr : dr + grid.shape[0]]
+        for dc in range(-GRID_REACH, GRID_REACH + 1):
+            near += np.roll(rows, dc, axis=1)
     inner = np.zeros(grid.shape, bool)
     inner[1:-1] = True
-    row, col = np.nonzero(inner & ~np.isin(grid, followed))
+    row, col = np.nonzero(inner & ~seen & (near >= MIN_GRID_NEIGHBOURS))
     row, col = row.astype(np.int64), col.astype(np.int64)
     return Candidates(grid[row, col], row, col, np.zeros(len(row), np.int64))
 

@@ -90,14 +90,16 @@ def unwrap_motion(
     with at least ``min_count`` known neighbours gets their per-axis median motion ``c``, and if
     it was found, the one of its miss and the miss less each neighbour's offset (the blob found
     may be that neighbour's dot, one offset over) nearest ``c`` where that is within its
-    tolerance: the motion is unwrapped across the grid as phase is. Last, a motion farther than
-    its tolerance from its known neighbours' median is not ``known``."""
+    tolerance: the motion is unwrapped across the grid as phase is. Last, a motion spread to a
+    target that is farther than its tolerance from its known neighbours' median is not
+    ``known`` (a seed's, its own measurement, stands)."""
     n, k = nb.shape
     motion = np.zeros((n, 2))
     known = np.zeros(n, np.bool_)
     for i in range(n):  # the seeds: a miss within the gate is the target's own motion
         if found[i] and miss[i, 0] ** 2 + miss[i, 1] ** 2 <= tol[i] ** 2:
             motion[i], known[i] = miss[i], True
+    seed = known.copy()
     buf = np.empty((k, 2))
     for _ in range(n):  # each round reaches the targets next to the known ones
         fresh = known.copy()
@@ -132,9 +134,9 @@ def unwrap_motion(
         if (fresh == known).all():
             break
         known = fresh
-    agree = known.copy()  # each motion must agree with its known neighbours' median
+    agree = known.copy()  # each motion spread to must agree with its known neighbours' median
     for i in range(n):
-        if not known[i]:
+        if not known[i] or seed[i]:
             continue
         m = 0
         for q in range(k):
