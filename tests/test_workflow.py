@@ -195,6 +195,13 @@ def test_a_camera_whose_video_cannot_be_read_is_left_out(tmp_path):
         proc = run_snakemake("-n", "--nolock", "--config", f"test={folder}", "min_cameras=2", extra)
         assert proc.returncode != 0 and says in proc.stdout + proc.stderr, proc.stdout + proc.stderr
         assert "camC.mp4: the video file is empty" in proc.stdout + proc.stderr
+    # the jobs of the cameras left run: the inventory lists them, without the others
+    work = workflow_copy(tmp_path)
+    proc = run_snakemake("--cores", "1", "--config", f"test={folder}", "min_cameras=2", "--",
+                         "results/wf-rec/inventory.json", workdir=work, timeout=None)  # fmt: skip
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    inventory = json.loads((work / "results/wf-rec/inventory.json").read_text())
+    assert [c["camera"] for c in inventory["cameras"]] == ["camA", "camD"]
 
 
 def test_an_archive_of_test_folders_is_processed_folder_by_folder(tmp_path):

@@ -356,11 +356,14 @@ def get_recorded_test_yaml(wildcards):
 
 
 def get_recorded_spec(wildcards):
-    """The validated test.yaml of a recorded test (cameras as mappings)."""
+    """The validated test.yaml of a recorded test (cameras as mappings), with only the cameras
+    measured (get_cameras: those left out are not)."""
     spec = _spec(wildcards.test)
     if "recorded" not in spec:
         raise WorkflowError(f"test {wildcards.test!r} is simulated, not recorded")
-    return spec["recorded"]
+    kept = set(get_cameras(wildcards.test))
+    cameras = [c for c in spec["recorded"]["cameras"] if c["name"] in kept]
+    return {**spec["recorded"], "cameras": cameras}
 
 
 def get_inventory_probes(wildcards):
