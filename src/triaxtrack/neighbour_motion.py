@@ -79,6 +79,24 @@ def median2(buf: np.ndarray, m: int) -> tuple[float, float]:
 
 
 @numba.njit(cache=True)
+def _known_median(
+    i: int, motion: np.ndarray, known: np.ndarray, nb: np.ndarray, buf: np.ndarray
+) -> tuple[int, float, float]:
+    """(count, per-axis median) of the ``motion`` of target ``i``'s ``known`` neighbours
+    (``buf`` (k, 2): scratch space); the median is NaN when there are none."""
+    n, m = len(motion), 0
+    for q in range(nb.shape[1]):
+        j = nb[i, q]
+        if j < n and known[j]:
+            buf[m] = motion[j]
+            m += 1
+    if m == 0:
+        return 0, np.nan, np.nan
+    cu, cv = median2(buf, m)
+    return m, cu, cv
+
+
+@numba.njit(cache=True)
 def unwrap_motion(
     miss: np.ndarray, found: np.ndarray, pos: np.ndarray, nb: np.ndarray, tol: np.ndarray, min_count: int
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -106,15 +124,9 @@ def unwrap_motion(
         for i in range(n):
             if known[i]:
                 continue
-            m = 0
-            for q in range(k):
-                j = nb[i, q]
-                if j < n and known[j]:
-                    buf[m] = motion[j]
-                    m += 1
+            m, cu, cv = _known_median(i, motion, known, nb, buf)
             if m < min_count:
                 continue
-            cu, cv = median2(buf, m)
             motion[i, 0], motion[i, 1], fresh[i] = cu, cv, True
             if not found[i]:
                 continue
@@ -138,13 +150,7 @@ def unwrap_motion(
     for i in range(n):
         if not known[i] or seed[i]:
             continue
-        m = 0
-        for q in range(k):
-            j = nb[i, q]
-            if j < n and known[j]:
-                buf[m] = motion[j]
-                m += 1
+        m, cu, cv = _known_median(i, motion, known, nb, buf)
         if m >= min_count:
-            cu, cv = median2(buf, m)
             agree[i] = (motion[i, 0] - cu) ** 2 + (motion[i, 1] - cv) ** 2 <= tol[i] ** 2
     return motion, agree
