@@ -191,3 +191,21 @@ between membrane grid rows ``row, row + 1`` and columns ``col, col + 1`` (1-base
 ``theta_rad, z_mm`` its centre in design (material) coordinates; ``e_zz`` axial (along the
 undeformed generatrix), ``e_tt`` circumferential, ``e_tz`` shear, in the undeformed tangent basis;
 tension positive (the opposite sign to the compression-positive strains of ``volume``)."""
+
+
+STRESS_TRUTH = Schema(
+    "stress_truth",
+    {"frame": "int64", "time_s": "float64", "axial_strain": "float64", "volumetric_strain": "float64",
+     "height_mm": "float64", "volume_mm3": "float64", "area_mean_mm2": "float64", "area_mid_mm2": "float64",
+     "area_min_mm2": "float64", "soil_force_n": "float64", "q_mean_kpa": "float64", "q_mid_kpa": "float64",
+     "q_min_kpa": "float64", "cell_pressure_kpa": "float64", "pore_pressure_kpa": "float64",
+     "p_kpa": "float64", "p_eff_kpa": "float64"},
+    ("frame",),
+)  # fmt: skip
+"""A simulated test's ``truth/stress_strain.parquet`` (``triaxtrack.simulate.loadlog``), per
+frame: true strains (compression positive), height, soil volume, the true mean area ``V / H``,
+the horizontal sections at mid-height and the smallest (``triaxtrack.stress.sections``'
+margin and levels), ``soil_force_n`` the force the soil carries (the log's load less the
+membrane's share and the load cell's offset), ``q_*_kpa`` that force on each area
+(``q_mean_kpa`` is the hyperbolic law's), the cell and pore pressures, ``p = sigma_3 + q / 3``
+and ``p' = p - u`` (on ``q_mean_kpa``)."""
