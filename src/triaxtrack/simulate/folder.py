@@ -28,7 +28,8 @@ def make_scene(cfg: SimulationConfig, kit_dir: str | Path, test_dir: str | Path,
 
     ``test.yaml`` (with its ``load_frame`` entry when the settings have one), ``kit/`` (a copy
     of the kit export), ``truth/scene.json`` (how to rebuild the scene), ``truth/cameras.json``
-    and ``truth/volume.parquet``. The load-frame log is written by :func:`write_load_frame`. Videos, calibration
+    and ``truth/volume.parquet``. The load-frame log is written by :func:`write_load_frame`.
+    Videos, calibration
     images and the per-target truth are written by :func:`render_chunk`,
     :func:`render_calibration` and :func:`finish_truth`.
     """

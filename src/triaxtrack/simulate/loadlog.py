@@ -116,7 +116,9 @@ def deviator_stress(lf: LoadFrameSimulation, ea: np.ndarray) -> np.ndarray:
     return np.maximum(virgin - lf.unload_modulus_kpa * (ea_max - ea), 0.0)
 
 
-def membrane_stress(modulus_kpa: float, thickness_mm: float, diameter_mm: float, ea: np.ndarray) -> np.ndarray:
+def membrane_stress(
+    modulus_kpa: float, thickness_mm: float, diameter_mm: float, ea: np.ndarray
+) -> np.ndarray:
     """ASTM D4767 membrane correction (kPa): ``4 E_m t_m ea / D0``, the axial stress the rubber
     membrane carries at axial strain ``ea``."""
     return 4 * modulus_kpa * thickness_mm * np.asarray(ea, float) / diameter_mm
@@ -150,14 +152,17 @@ def simulate_load_frame(
     s = _state(deformation, p)
     ea = (h0 - s["height_mm"]) / h0
     q = deviator_stress(lf, ea)
-    force = (q + membrane_stress(lf.membrane_modulus_kpa, t_m, d0, ea)) * s["area_mean_mm2"] / 1000 + lf.load_offset_n
+    force = (q + membrane_stress(lf.membrane_modulus_kpa, t_m, d0, ea)) * s[
+        "area_mean_mm2"
+    ] / 1000 + lf.load_offset_n
     rng = np.random.default_rng([cfg.seed, NOISE_STREAM])
     m = len(t_log)
+    sig_p = lf.noise_pressure_kpa
     log = pd.DataFrame({
         LOG_COLUMNS["time"][0]: np.round(t_log, 3),
         LOG_COLUMNS["axial_load"][0]: np.round((force + lf.noise_force_n * rng.standard_normal(m)) / 1000, 7),
-        LOG_COLUMNS["cell_pressure"][0]: np.round(lf.cell_pressure_kpa + lf.noise_pressure_kpa * rng.standard_normal(m), 3),
-        LOG_COLUMNS["pore_pressure"][0]: np.round(lf.pore_pressure_kpa + lf.noise_pressure_kpa * rng.standard_normal(m), 3),
+        LOG_COLUMNS["cell_pressure"][0]: np.round(lf.cell_pressure_kpa + sig_p * rng.standard_normal(m), 3),
+        LOG_COLUMNS["pore_pressure"][0]: np.round(lf.pore_pressure_kpa + sig_p * rng.standard_normal(m), 3),
         LOG_COLUMNS["axial_displacement"][0]: np.round(
             lf.lvdt_zero_mm + (h0 - s["height_mm"]) + lf.noise_displacement_mm * rng.standard_normal(m), 5),
         LOG_COLUMNS["volume_change"][0]: np.round(

@@ -18,7 +18,9 @@ SECTION_REFINE = 8  # columns of the smooth surface per membrane column: a 512-g
 # (2 pi / 512)^2 / 6 = 2.5e-5 short of the smooth section's
 
 
-def section_heights(z_bottom: float, z_top: float, levels: int = SECTION_LEVELS, margin: float = SECTION_MARGIN) -> np.ndarray:
+def section_heights(
+    z_bottom: float, z_top: float, levels: int = SECTION_LEVELS, margin: float = SECTION_MARGIN
+) -> np.ndarray:
     """(levels,) heights (mm) evenly between ``margin`` of the height above the bottom and below
     the top."""
     h = z_top - z_bottom
@@ -52,7 +54,9 @@ def ring_sections(rings: np.ndarray, z: np.ndarray) -> np.ndarray:
     return out
 
 
-def soil_rings(grid: MembraneGrid, cap, thickness_mm: float | np.ndarray, refine: int = SECTION_REFINE) -> np.ndarray:
+def soil_rings(
+    grid: MembraneGrid, cap, thickness_mm: float | np.ndarray, refine: int = SECTION_REFINE
+) -> np.ndarray:
     """(Nz, Nc, 3) rings of the soil surface (the membrane's inner surface) between the faces."""
     vertices, _ = closed_mesh(grid, cap, refine, thickness_mm, inner=True)
     n_c = len(grid.theta) * refine
@@ -80,7 +84,9 @@ def section_areas(
     rows = []
     grid0 = None
     try:
-        grid0 = frame_grid(points[points["frame"] == reference_frame], table, design, t0, max_missing_share)[0]
+        grid0 = frame_grid(points[points["frame"] == reference_frame], table, design, t0, max_missing_share)[
+            0
+        ]
     except FAILURES:
         grid0 = None
     for frame, pf in points.groupby("frame", sort=True):
