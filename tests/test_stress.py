@@ -12,7 +12,7 @@ import pytest
 from triaxtrack.deformation import Deformation
 from triaxtrack.kit import design_points
 from triaxtrack.simulate import SimulationConfig, loading_progress
-from triaxtrack.simulate.loadlog import LOG_COLUMNS, deviator_stress, LoadFrameSimulation, simulate_load_frame
+from triaxtrack.simulate.loadlog import LOG_COLUMNS, LoadFrameSimulation, deviator_stress, simulate_load_frame
 from triaxtrack.stress import (
     StressConfig,
     estimate_clock_offset,
@@ -43,7 +43,10 @@ def simulated():
 
 def write_log(tmp_path, log: pd.DataFrame) -> dict:
     log.to_csv(tmp_path / "loadframe.csv", index=False)
-    return {"file": "loadframe.csv", "columns": {k: {"name": n, "unit": u} for k, (n, u) in LOG_COLUMNS.items()}}
+    return {
+        "file": "loadframe.csv",
+        "columns": {k: {"name": n, "unit": u} for k, (n, u) in LOG_COLUMNS.items()},
+    }
 
 
 def measured_volume(truth: pd.DataFrame, seed: int = 0) -> pd.DataFrame:
@@ -71,8 +74,9 @@ def test_log_columns_and_units(tmp_path, simulated):
     cfg, log, truth, meta = simulated
     gds = read_load_frame_log(tmp_path, write_log(tmp_path, log))
     t0 = pd.Timestamp("2026-11-25 14:03:27")
+    stamps = t0 + pd.to_timedelta(log[LOG_COLUMNS["time"][0]], unit="s")
     generic = pd.DataFrame({
-        "timestamp": (t0 + pd.to_timedelta(log[LOG_COLUMNS["time"][0]], unit="s")).dt.strftime("%Y-%m-%d %H:%M:%S.%f"),
+        "timestamp": stamps.dt.strftime("%Y-%m-%d %H:%M:%S.%f"),
         "load_N": log[LOG_COLUMNS["axial_load"][0]] * 1000,
         "sigma3_MPa": log[LOG_COLUMNS["cell_pressure"][0]] / 1000,
         "u_MPa": log[LOG_COLUMNS["pore_pressure"][0]] / 1000,
@@ -81,10 +85,17 @@ def test_log_columns_and_units(tmp_path, simulated):
     generic.to_csv(tmp_path / "logger.txt", sep=";", index=False)
     entry = {"file": "logger.txt", "delimiter": ";", "columns": {
         "time": {"name": "timestamp", "unit": "datetime"}, "axial_load": {"name": "load_N", "unit": "N"},
-        "cell_pressure": {"name": "sigma3_MPa", "unit": "MPa"}, "pore_pressure": {"name": "u_MPa", "unit": "MPa"},
+        "cell_pressure": {"name": "sigma3_MPa", "unit": "MPa"},
+        "pore_pressure": {"name": "u_MPa", "unit": "MPa"},
         "axial_displacement": {"name": "lvdt_m", "unit": "m", "sign": -1}}}  # fmt: skip
     other = read_load_frame_log(tmp_path, entry)
-    for col in ("log_time_s", "axial_load_n", "cell_pressure_kpa", "pore_pressure_kpa", "axial_displacement_mm"):
+    for col in (
+        "log_time_s",
+        "axial_load_n",
+        "cell_pressure_kpa",
+        "pore_pressure_kpa",
+        "axial_displacement_mm",
+    ):
         assert np.allclose(other[col], gds[col], rtol=1e-9, atol=1e-6), col
     assert other["volume_change_mm3"].isna().all() and gds["volume_change_mm3"].notna().all()
     bad = {**entry, "columns": {**entry["columns"], "axial_load": {"name": "load_kN", "unit": "kN"}}}
@@ -96,8 +107,10 @@ def test_log_columns_and_units(tmp_path, simulated):
     with pytest.raises(ValueError, match=r"logger\.txt: column 'load_N' \(axial_load\): row 6"):
         read_load_frame_log(tmp_path, entry)
     with pytest.raises(ValueError, match="unit 'lb'"):
-        read_load_frame_log(tmp_path, {**entry, "columns": {**entry["columns"], "axial_load": {"name": "load_N",
-                                                                                             "unit": "lb"}}})
+        read_load_frame_log(
+            tmp_path,
+            {**entry, "columns": {**entry["columns"], "axial_load": {"name": "load_N", "unit": "lb"}}},
+        )
 
 
 def test_clock_offset_and_warning(tmp_path, simulated):
@@ -105,7 +118,10 @@ def test_clock_offset_and_warning(tmp_path, simulated):
     lg = read_load_frame_log(tmp_path, write_log(tmp_path, log))
     vol = measured_volume(truth)
     est = estimate_clock_offset(
-        lg["log_time_s"], lg["axial_displacement_mm"], vol["time_s"], vol["height_mm"].iloc[0] - vol["height_mm"]
+        lg["log_time_s"],
+        lg["axial_displacement_mm"],
+        vol["time_s"],
+        vol["height_mm"].iloc[0] - vol["height_mm"],
     )
     assert abs(est.offset_s - OFFSET_S) * cfg.fps < OFFSET_TOL_FRAMES
     assert abs(est.offset_s - OFFSET_S) < 4 * est.sigma_s + 1e-3
@@ -122,7 +138,10 @@ def test_q_on_the_mean_area_against_truth(tmp_path, simulated):
     lg = read_load_frame_log(tmp_path, write_log(tmp_path, log))
     vol = measured_volume(truth)
     est = estimate_clock_offset(
-        lg["log_time_s"], lg["axial_displacement_mm"], vol["time_s"], vol["height_mm"].iloc[0] - vol["height_mm"]
+        lg["log_time_s"],
+        lg["axial_displacement_mm"],
+        vol["time_s"],
+        vol["height_mm"].iloc[0] - vol["height_mm"],
     )
     sec = truth[["frame", "area_mid_mm2", "area_min_mm2"]]
     out = stress_strain(vol, sec, lg, est.offset_s, DESIGN, StressConfig(), est.sigma_s)
@@ -174,7 +193,11 @@ def test_measured_sections_against_truth(design, table, series):
         smallest = d.section_area(section_heights(0.0, h), p).min()
         row = sec.iloc[k]
         assert abs(row["area_mid_mm2"] - mid) / mid < SECTION_TOL, (k, row["area_mid_mm2"], mid)
-        assert abs(row["area_min_mm2"] - smallest) / smallest < SECTION_TOL, (k, row["area_min_mm2"], smallest)
+        assert abs(row["area_min_mm2"] - smallest) / smallest < SECTION_TOL, (
+            k,
+            row["area_min_mm2"],
+            smallest,
+        )
 
 
 def test_exports_open_in_pandas_and_meshio(tmp_path, design, table, series, simulated):
@@ -198,11 +221,15 @@ def test_exports_open_in_pandas_and_meshio(tmp_path, design, table, series, simu
     assert last.points.shape == (n_dots, 3)
     assert {"displacement_mm", "e_zz", "e_tt", "e_tz", "radial_mm", "measured"} <= set(last.point_data)
     top = np.argmax(last.points[:, 2])
-    assert last.point_data["displacement_mm"][top, 2] < -0.9 * 0.10 * 142.2 * (1 - 0.3 / 60)  # the top row sinks
+    assert last.point_data["displacement_mm"][top, 2] < -0.9 * 0.10 * 142.2 * (
+        1 - 0.3 / 60
+    )  # the top row sinks
     first = meshio.read(tmp_path / "paraview" / files[0])
     assert np.allclose(first.point_data["displacement_mm"], 0) and np.allclose(first.point_data["e_zz"], 0)
     html = viewer_html(frames, "e_zz", "test")
     assert len(html) > 1_000_000  # plotly.js is inlined
-    loads = re.findall(r"<(?:script|link|img|iframe)[^>]+(?:src|href)\s*=\s*[\"']?\s*(?:https?:)?//", html, re.I)
+    loads = re.findall(
+        r"<(?:script|link|img|iframe)[^>]+(?:src|href)\s*=\s*[\"']?\s*(?:https?:)?//", html, re.I
+    )
     assert not loads, loads
     assert not re.search(r"@import\s+(?:url\()?[\"']?(?:https?:)?//", html, re.I)

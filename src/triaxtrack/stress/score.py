@@ -31,10 +31,14 @@ def score_stress(
     if clock is not None and truth_clock is not None:
         fps = float(clock.get("fps", np.nan))
         err = abs(float(clock["estimated_offset_s"]) - float(truth_clock["clock_offset_s"])) * fps
-        rows.append(_metric("clock_offset_error", "all", err, tol.clock_offset_frames, "frames", "clock.json"))
+        rows.append(
+            _metric("clock_offset_error", "all", err, tol.clock_offset_frames, "frames", "clock.json")
+        )
         rows.append(_metric("clock_offset_sigma", "all", float(clock["sigma_s"]) * fps, unit="frames",
                             source="clock.json"))  # fmt: skip
-        rows.append(_metric("clock_residual", "all", float(clock["residual_mm"]), unit="mm", source="clock.json"))
+        rows.append(
+            _metric("clock_residual", "all", float(clock["residual_mm"]), unit="mm", source="clock.json")
+        )
     m = truth.merge(stress, on="frame", how="left", suffixes=("_true", ""))
     peak = float(np.nanmax(np.abs(m["q_mean_kpa_true"]))) if len(m) else np.nan
     per_frame = []
@@ -43,7 +47,9 @@ def score_stress(
         err = abs(r.q_mean_kpa - r.q_mean_kpa_true)
         item = f"all@{r.frame}"
         if big:
-            per_frame.append(_metric("q_mean_error", item, err / abs(r.q_mean_kpa_true), tol.q_rel, "", source))
+            per_frame.append(
+                _metric("q_mean_error", item, err / abs(r.q_mean_kpa_true), tol.q_rel, "", source)
+            )
             for name, value, true in (
                 ("q_mid_error", r.q_mid_kpa, r.q_mid_kpa_true),
                 ("q_min_error", r.q_min_kpa, r.q_min_kpa_true),
