@@ -181,6 +181,11 @@ def _sim_config(test):
     return {**config["simulation"], **spec["simulate"]}
 
 
+def get_load_frame_settings(wildcards):
+    """The simulated load-frame log's settings of a simulated test (`load_frame`)."""
+    return _sim_config(wildcards.test).get("load_frame", {})
+
+
 def get_sim_config(wildcards):
     """Simulation settings of a simulated test: config["simulation"] with the test's
     `simulate` overrides applied key by key (fields of triaxtrack.simulate.SimulationConfig).

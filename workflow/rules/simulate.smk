@@ -189,5 +189,7 @@ rule simulate_load_frame:
     resources:
         mem_mb=1000,
         runtime=10,
+    params:
+        load_frame=get_load_frame_settings,
     script:
         "../scripts/simulate_load_frame.py"

@@ -7,4 +7,4 @@ from triaxtrack.simulate.loadlog import write_load_frame
 
 log = log_to(snakemake.log[0])
 
-write_load_frame(Path(snakemake.input.test_yaml).parent)
+write_load_frame(Path(snakemake.input.test_yaml).parent, snakemake.params.load_frame)

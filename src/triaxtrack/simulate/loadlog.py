@@ -63,16 +63,16 @@ class LoadFrameSimulation:
     clock_offset_s: float = 0.0  # log time minus test time (the log starts this long before frame 0)
     offset_in_test_yaml: bool = False  # write clock_offset_s into test.yaml (else the pipeline estimates it)
     post_s: float = 2.0  # logged beyond the last frame
-    a_per_kpa: float = 2.0e-5  # hyperbolic law: 1/a = initial Young's modulus (50 MPa)
+    a_per_kpa: float = 5.0e-5  # hyperbolic law: 1/a = initial Young's modulus (20 MPa, a loose sand)
     b_per_kpa: float = 2.5e-3  # 1/b = asymptotic deviator stress (400 kPa)
-    unload_modulus_kpa: float = 1.5e5  # unloading-reloading Young's modulus
+    unload_modulus_kpa: float = 6.0e4  # unloading-reloading Young's modulus (3 / a)
     membrane_modulus_kpa: float = 1400.0  # latex (ASTM D4767: 1400 kPa)
     load_offset_n: float = 25.0  # load-cell reading before shearing (removed by zeroing)
     cell_pressure_kpa: float = 300.0
     pore_pressure_kpa: float = 200.0  # back pressure (drained)
     lvdt_zero_mm: float = 12.5  # the external LVDT's reading at the first frame
     volume_zero_mm3: float = 50000.0  # the volume gauge's reading at the first frame
-    noise_force_n: float = 0.3  # standard deviations of the log's noise
+    noise_force_n: float = 0.2  # standard deviations of the log's noise (a 5 kN load cell's 0.2 N)
     noise_displacement_mm: float = 0.002
     noise_pressure_kpa: float = 0.1
     noise_volume_mm3: float = 5.0
@@ -208,16 +208,22 @@ def simulate_load_frame(
     return log, truth, meta
 
 
-def write_load_frame(test_dir: str | Path) -> None:
+def write_load_frame(test_dir: str | Path, settings: dict | None = None) -> None:
     """Write ``loadframe.csv``, ``truth/loadframe.json`` and ``truth/stress_strain.parquet`` of
-    a simulated test whose settings have a ``load_frame`` (ValueError otherwise)."""
+    a simulated test: with the log's ``settings`` (``SimulationConfig.load_frame``; default
+    the scene's), which must not be empty (ValueError). The log only reads the scene (the
+    deformation and its history), so it can be rewritten with other settings without
+    rendering again; ``offset_in_test_yaml`` is the scene's (test.yaml is written with it)."""
+    from dataclasses import replace
+
     from triaxtrack.simulate.scene import load_scene
 
     test_dir = Path(test_dir)
     scene = load_scene(test_dir)
-    if not scene.cfg.load_frame:
+    cfg = scene.cfg if settings is None else replace(scene.cfg, load_frame=dict(settings))
+    if not cfg.load_frame:
         raise ValueError(f"{test_dir}: the simulation has no load_frame settings (no log to write)")
-    log, truth, meta = simulate_load_frame(scene.cfg, scene.deformation)
+    log, truth, meta = simulate_load_frame(cfg, scene.deformation)
     log.to_csv(test_dir / LOG_FILE, index=False)
     (test_dir / "truth" / "loadframe.json").write_text(json.dumps(meta, indent=2))
     write_table(truth, test_dir / "truth" / "stress_strain.parquet", STRESS_TRUTH)

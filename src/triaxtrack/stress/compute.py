@@ -7,7 +7,10 @@ Sign conventions: compression positive (strains, q); stresses in kPa, forces in 
 * Zeroing at ``zero_time_s`` (test clock; default the volume's reference frame): the log's load
   then is subtracted (the ram's friction and uplift, a seating load), strains count from the
   measured height and volume then, and the log's displacement and volume gauge from their
-  readings then.
+  readings then; the log's readings "then" are its means over ``zero_window_s`` up to the zero
+  time (the specimen must be at rest: a load that starts rising just after would otherwise leak
+  into the zero through the interpolation), or interpolated at it when the window holds fewer
+  than 2 samples.
 * ``force_n`` is the zeroed load; the membrane carries ``4 E_m t_m ea / D0`` (ASTM D4767 /
   ISO 17892-9) and filter paper strips ``K_fp P / A`` (ASTM D4767: in full beyond 2 % axial
   strain, in proportion below), stresses taken on the measured mean area; ``soil_force_n`` is
@@ -46,6 +49,7 @@ class StressConfig:
     membrane_thickness_mm: float | None = None  # None: the kit's
     filter_paper_kn_per_m: float = 0.0  # K_fp, load per perimeter of side drains; 0: none
     zero_time_s: float | None = None  # test clock; None: the volume's reference frame
+    zero_window_s: float = 0.5  # the log's zeros: its mean over this long up to the zero time (at rest)
     tangent_frames: int = 5  # frames of the local fit for the tangent modulus (odd)
     tangent_min_strain: float = 2e-4  # the window's strain span below which no tangent is given
     secant_min_strain: float = 1e-4  # no secant modulus below this axial strain
@@ -166,11 +170,17 @@ def stress_strain(
     h_zero = float(np.interp(t_zero, t[finite], height[finite])) if finite.any() else np.nan
     v_zero = float(np.interp(t_zero, t[finite], v_mm3[finite])) if finite.any() else np.nan
     tz = np.array([t_zero + offset_s])
-    f_zero, d_zero, g_zero = (
-        at("axial_load_n", tz)[0],
-        at("axial_displacement_mm", tz)[0],
-        at("volume_change_mm3", tz)[0],
-    )
+    window = (log_t <= tz[0]) & (log_t >= tz[0] - config.zero_window_s)
+    n_zero = int(window.sum())
+
+    def zero(col: str) -> float:
+        """The log's reading at the zero time: the mean over the window (the specimen at rest, so
+        a load rising just after the zero time does not leak into it), or interpolated there."""
+        if config.zero_window_s > 0 and n_zero >= 2:
+            return float(np.mean(log[col].to_numpy(float)[window]))
+        return float(at(col, tz)[0])
+
+    f_zero, d_zero, g_zero = zero("axial_load_n"), zero("axial_displacement_mm"), zero("volume_change_mm3")
 
     load = at("axial_load_n", tl)
     force = load - f_zero
@@ -199,7 +209,9 @@ def stress_strain(
 
     # uncertainties
     sig_f = noise_sigma(log["axial_load_n"].to_numpy(float))
-    sig_force = sig_f * np.sqrt(_interp_weights(tl, log_t) ** 2 + _interp_weights(tz, log_t)[0] ** 2)
+    at_rest = config.zero_window_s > 0 and n_zero >= 2
+    zero_share = 1 / np.sqrt(n_zero) if at_rest else _interp_weights(tz, log_t)[0]
+    sig_force = sig_f * np.sqrt(_interp_weights(tl, log_t) ** 2 + zero_share**2)
     rate = np.gradient(load, t) if len(t) > 1 else np.zeros_like(t)
     sig_force = np.sqrt(sig_force**2 + (rate * offset_sigma_s) ** 2)
     rel_area = vol["volume_sigma_mm3"].to_numpy(float) / v_mm3
