@@ -233,3 +233,21 @@ def test_exports_open_in_pandas_and_meshio(tmp_path, design, table, series, simu
     )
     assert not loads, loads
     assert not re.search(r"@import\s+(?:url\()?[\"']?(?:https?:)?//", html, re.I)
+
+
+def test_stress_figures_and_table_schema(tmp_path, simulated):
+    from matplotlib.figure import Figure
+
+    from triaxtrack.report.stress import modulus_figure, q_strain_figure, volumetric_figure
+    from triaxtrack.tables import STRESS_STRAIN, STRESS_TRUTH, read_table, write_table
+
+    cfg, log, truth, meta = simulated
+    lg = read_load_frame_log(tmp_path, write_log(tmp_path, log))
+    sec = truth[["frame", "area_mid_mm2", "area_min_mm2"]]
+    out = stress_strain(measured_volume(truth), sec, lg, OFFSET_S, DESIGN)
+    write_table(out, tmp_path / "s.parquet", STRESS_STRAIN)
+    write_table(truth, tmp_path / "t.parquet", STRESS_TRUTH)
+    assert len(read_table(tmp_path / "s.parquet", STRESS_STRAIN)) == cfg.frames
+    for draw in (q_strain_figure, volumetric_figure, modulus_figure):
+        assert isinstance(draw(out), Figure)
+        assert isinstance(draw(out.iloc[:0]), Figure)  # no data: a figure that says so

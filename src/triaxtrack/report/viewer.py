@@ -63,4 +63,4 @@ def viewer_html(frames: list[MembraneFrame], colour_by: str = "e_zz", title: str
         height=800,
     )  # fmt: skip
     return fig.to_html(include_plotlyjs=True, full_html=True, include_mathjax=False,
-                       config={"displaylogo": False, "showLink": False})  # fmt: skip
+                       config={"displaylogo": False})  # fmt: skip
