@@ -251,3 +251,26 @@ def test_stress_figures_and_table_schema(tmp_path, simulated):
     for draw in (q_strain_figure, volumetric_figure, modulus_figure):
         assert isinstance(draw(out), Figure)
         assert isinstance(draw(out.iloc[:0]), Figure)  # no data: a figure that says so
+
+
+def test_test_yaml_load_frame_schema():
+    """test.yaml's load_frame entry: the simulator's is valid; a misspelt quantity or a missing
+    required one is named."""
+    from pathlib import Path
+
+    import yaml
+
+    from triaxtrack.errors import schema_problems
+    from triaxtrack.simulate.loadlog import load_frame_entry
+
+    schema_path = Path(__file__).parents[1] / "workflow" / "schemas" / "test.schema.yaml"
+    schema = yaml.safe_load(schema_path.read_text())
+    entry = load_frame_entry(SimulationConfig.from_dict({"load_frame": {"clock_offset_s": 1.0,
+                                                                        "offset_in_test_yaml": True}}))  # fmt: skip
+    doc = {"name": "t", "fps": 15, "cameras": ["cam01"], "load_frame": entry}
+    assert entry["clock_offset_s"] == 1.0 and schema_problems(doc, schema, [("t.yaml", doc)]) == []
+    cols = dict(entry["columns"])
+    cols["axial_lod"] = cols.pop("axial_load")
+    bad = {**doc, "load_frame": {**entry, "columns": cols}}
+    problems = " ".join(schema_problems(bad, schema, [("t.yaml", bad)]))
+    assert "axial_lod" in problems and "axial_load" in problems
