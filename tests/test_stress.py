@@ -265,8 +265,8 @@ def test_test_yaml_load_frame_schema():
 
     schema_path = Path(__file__).parents[1] / "workflow" / "schemas" / "test.schema.yaml"
     schema = yaml.safe_load(schema_path.read_text())
-    entry = load_frame_entry(SimulationConfig.from_dict({"load_frame": {"clock_offset_s": 1.0,
-                                                                        "offset_in_test_yaml": True}}))  # fmt: skip
+    settings = {"clock_offset_s": 1.0, "offset_in_test_yaml": True}
+    entry = load_frame_entry(SimulationConfig.from_dict({"load_frame": settings}))
     doc = {"name": "t", "fps": 15, "cameras": ["cam01"], "load_frame": entry}
     assert entry["clock_offset_s"] == 1.0 and schema_problems(doc, schema, [("t.yaml", doc)]) == []
     cols = dict(entry["columns"])
