@@ -502,24 +502,13 @@ def score(results_dir: str | Path, truth_dir: str | Path, tol: ScoreTolerances |
         parts.append(score_volume(read_table(results_dir / "volume.parquet", VOLUME),
                                   read_table(truth_dir / "volume.parquet", VOLUME), tol))  # fmt: skip
     if (results_dir / "stress_strain.parquet").exists() and (truth_dir / "stress_strain.parquet").exists():
-        parts.append(_score_stress(results_dir, truth_dir, tol))
+        from triaxtrack.stress.score import score_stress_files
+
+        parts.append(score_stress_files(results_dir, truth_dir, tol))
     if not parts:
         return pd.DataFrame(columns=COLUMNS)
     return pd.concat(parts, ignore_index=True)
 
-
-def _score_stress(results_dir: Path, truth_dir: Path, tol: ScoreTolerances) -> pd.DataFrame:
-    from triaxtrack.stress.score import score_stress
-    from triaxtrack.tables import STRESS_STRAIN, STRESS_TRUTH, read_table
-
-    clock, truth_clock = results_dir / "clock.json", truth_dir / "loadframe.json"
-    return score_stress(
-        read_table(results_dir / "stress_strain.parquet", STRESS_STRAIN),
-        read_table(truth_dir / "stress_strain.parquet", STRESS_TRUTH),
-        json.loads(clock.read_text()) if clock.exists() else None,
-        json.loads(truth_clock.read_text()) if truth_clock.exists() else None,
-        tol,
-    )
 
 
 def _score_labels(

@@ -3,6 +3,9 @@
 
 from __future__ import annotations
 
+import json
+from pathlib import Path
+
 import numpy as np
 import pandas as pd
 
@@ -62,3 +65,18 @@ def score_stress(
     if per_frame:
         out.append(summarise_frames(pd.DataFrame(per_frame, columns=COLUMNS)))
     return pd.concat(out, ignore_index=True)
+
+
+def score_stress_files(results_dir: Path, truth_dir: Path, tol) -> pd.DataFrame:
+    """:func:`score_stress` of ``results_dir/stress_strain.parquet`` (and ``clock.json``) against
+    ``truth_dir/stress_strain.parquet`` (and ``loadframe.json``)."""
+    from triaxtrack.tables import STRESS_STRAIN, STRESS_TRUTH, read_table
+
+    clock, truth_clock = Path(results_dir) / "clock.json", Path(truth_dir) / "loadframe.json"
+    return score_stress(
+        read_table(Path(results_dir) / "stress_strain.parquet", STRESS_STRAIN),
+        read_table(Path(truth_dir) / "stress_strain.parquet", STRESS_TRUTH),
+        json.loads(clock.read_text()) if clock.exists() else None,
+        json.loads(truth_clock.read_text()) if truth_clock.exists() else None,
+        tol,
+    )
