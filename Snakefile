@@ -28,6 +28,7 @@ include: "workflow/rules/reconstruct.smk"
 include: "workflow/rules/track.smk"
 include: "workflow/rules/volume.smk"
 include: "workflow/rules/report.smk"
+include: "workflow/rules/stress.smk"
 include: "workflow/rules/inventory.smk"
 
 

@@ -146,3 +146,23 @@ class Deformation:
         k = self.axial_nonuniformity * p
         dz_dZ = self.current_height(p) / self.height * (1 - k * (1 - 2 * Z / self.height))
         return float(np.sum(area * dz_dZ * wz))
+
+    # ----------------------------------------------------------------- sections
+    def material_z(self, z: np.ndarray, p: float) -> np.ndarray:
+        """Material height Z (mm) of the soil surface at current height ``z`` (mm above the bottom
+        face), progress p: the exact inverse of ``z = H g(Z / H0)`` (clipped to the faces)."""
+        k = self.axial_nonuniformity * p
+        u = np.clip(np.asarray(z, float) / self.current_height(p), 0.0, 1.0)
+        return self.height * 2 * u / ((1 - k) + np.sqrt((1 - k) ** 2 + 4 * k * u))  # stable root
+
+    def section_area(self, z: np.ndarray, p: float, n_theta: int = 256) -> np.ndarray:
+        """Area (mm^2) of the horizontal soil section at current heights ``z`` (mm), progress p.
+
+        The slice at material height Z is star-shaped about the axis offset ``c(Z)``, of area
+        ``1/2 int rho^2 dtheta`` (trapezoidal in theta: spectrally accurate)."""
+        zeta = self.material_z(np.atleast_1d(z), p)[:, None] / self.height
+        th = 2 * np.pi * np.arange(n_theta) / n_theta
+        rho = self.radius + self.bulge_mm * p * self._phi(zeta) * (
+            1 + self.bulge_asymmetry * np.cos(th[None, :] - self.bulge_azimuth)
+        )
+        return 0.5 * (rho**2).sum(axis=1) * (2 * np.pi / n_theta)

@@ -46,6 +46,9 @@ class ScoreTolerances:
     volume_rel: float = 0.0025  # |V - V_true| / V_true at every processed frame
     volume_change_rel: float = 0.0005  # |dV - dV_true| / V0_true at every processed frame
     axial_strain: float = 0.0005  # |axial strain - true|, at every processed frame
+    clock_offset_frames: float = 1.0  # |estimated - true| clock offset of the load-frame log, frames
+    q_rel: float = 0.005  # |q - q_true| / q_true on the mean area, where q_true > 10 % of its peak
+    q_abs_kpa: float = 1.0  # |q - q_true| on the mean area elsewhere, kPa
 
     @staticmethod
     def from_dict(d: dict | None) -> ScoreTolerances:
@@ -498,9 +501,14 @@ def score(results_dir: str | Path, truth_dir: str | Path, tol: ScoreTolerances |
 
         parts.append(score_volume(read_table(results_dir / "volume.parquet", VOLUME),
                                   read_table(truth_dir / "volume.parquet", VOLUME), tol))  # fmt: skip
+    if (results_dir / "stress_strain.parquet").exists() and (truth_dir / "stress_strain.parquet").exists():
+        from triaxtrack.stress.score import score_stress_files
+
+        parts.append(score_stress_files(results_dir, truth_dir, tol))
     if not parts:
         return pd.DataFrame(columns=COLUMNS)
     return pd.concat(parts, ignore_index=True)
+
 
 
 def _score_labels(

@@ -191,3 +191,49 @@ between membrane grid rows ``row, row + 1`` and columns ``col, col + 1`` (1-base
 ``theta_rad, z_mm`` its centre in design (material) coordinates; ``e_zz`` axial (along the
 undeformed generatrix), ``e_tt`` circumferential, ``e_tz`` shear, in the undeformed tangent basis;
 tension positive (the opposite sign to the compression-positive strains of ``volume``)."""
+
+
+STRESS_TRUTH = Schema(
+    "stress_truth",
+    {"frame": "int64", "time_s": "float64", "axial_strain": "float64", "volumetric_strain": "float64",
+     "height_mm": "float64", "volume_mm3": "float64", "area_mean_mm2": "float64", "area_mid_mm2": "float64",
+     "area_min_mm2": "float64", "soil_force_n": "float64", "q_mean_kpa": "float64", "q_mid_kpa": "float64",
+     "q_min_kpa": "float64", "cell_pressure_kpa": "float64", "pore_pressure_kpa": "float64",
+     "p_kpa": "float64", "p_eff_kpa": "float64"},
+    ("frame",),
+)  # fmt: skip
+"""A simulated test's ``truth/stress_strain.parquet`` (``triaxtrack.simulate.loadlog``), per
+frame: true strains (compression positive), height, soil volume, the true mean area ``V / H``,
+the horizontal sections at mid-height and the smallest (``triaxtrack.stress.sections``'
+margin and levels), ``soil_force_n`` the force the soil carries (the log's load less the
+membrane's share and the load cell's offset), ``q_*_kpa`` that force on each area
+(``q_mean_kpa`` is the hyperbolic law's), the cell and pore pressures, ``p = sigma_3 + q / 3``
+and ``p' = p - u`` (on ``q_mean_kpa``)."""
+
+_F = "float64"
+STRESS_STRAIN = Schema(
+    "stress_strain",
+    {"frame": "int64", "time_s": _F, "log_time_s": _F, "axial_strain": _F, "volumetric_strain": _F,
+     "axial_strain_log": _F, "volumetric_strain_gauge": _F, "height_mm": _F, "volume_mm3": _F,
+     "axial_load_n": _F, "force_n": _F, "soil_force_n": _F, "cell_pressure_kpa": _F, "pore_pressure_kpa": _F,
+     "area_mean_mm2": _F, "area_mid_mm2": _F, "area_min_mm2": _F, "area_standard_mm2": _F,
+     "membrane_kpa": _F, "filter_paper_kpa": _F, "q_mean_kpa": _F, "q_mean_sigma_kpa": _F,
+     "q_mid_kpa": _F, "q_mid_sigma_kpa": _F, "q_min_kpa": _F, "q_min_sigma_kpa": _F,
+     "q_standard_kpa": _F, "q_standard_sigma_kpa": _F, "p_kpa": _F, "p_eff_kpa": _F, "p_sigma_kpa": _F,
+     "p_eff_sigma_kpa": _F, "axial_strain_sigma": _F, "e_secant_kpa": _F, "e_secant_sigma_kpa": _F,
+     "e_tangent_kpa": _F, "e_tangent_sigma_kpa": _F, "reason": "object"},
+    ("frame",),
+)  # fmt: skip
+"""The measured ``results/<test>/stress_strain.parquet`` (``triaxtrack.stress``), per processed
+frame, compression positive, kPa, N, mm: ``log_time_s`` the frame's time on the log's clock;
+``axial_strain``, ``volumetric_strain`` from the measured height and volume, zeroed at the
+stress stage's zero time; ``axial_strain_log`` from the log's external displacement over the
+nominal height, ``volumetric_strain_gauge`` from its volume gauge over the nominal volume (NaN
+without one); ``axial_load_n`` the log's load, ``force_n`` zeroed, ``soil_force_n`` less the
+membrane's and filter paper's shares (``membrane_kpa``, ``filter_paper_kpa``, on the mean area);
+``area_mean_mm2 = V / H``, ``area_mid_mm2`` the section at mid-height, ``area_min_mm2`` the
+smallest section (``triaxtrack.stress.sections``), ``area_standard_mm2 = A0 (1 - ev_gauge) /
+(1 - ea_log)``; ``q_*_kpa`` the deviator stress on each (``q_standard_kpa`` the lab's standard,
+with its own corrections), ``p_kpa = sigma_3 + q_mean / 3``, ``p_eff_kpa = p - u``; secant and
+tangent Young's moduli of ``q_mean`` against ``axial_strain``; ``*_sigma_*`` the standard
+uncertainties (``triaxtrack.stress.compute``); ``reason`` '' or why a frame lacks values."""

@@ -198,6 +198,11 @@ def _sim_config(test):
     return {**config["simulation"], **spec["simulate"]}
 
 
+def get_load_frame_settings(wildcards):
+    """The simulated load-frame log's settings of a simulated test (`load_frame`)."""
+    return _sim_config(wildcards.test).get("load_frame", {})
+
+
 def get_sim_config(wildcards):
     """Simulation settings of a simulated test: config["simulation"] with the test's
     `simulate` overrides applied key by key (fields of triaxtrack.simulate.SimulationConfig).
@@ -513,13 +518,41 @@ def get_timestep_motion(wildcards):
     )
 
 
+# ---------------------------------------------------------------- the load-frame log
+
+
+def has_load_frame(test):
+    """Whether a test has a load-frame log: a simulated test whose settings have `load_frame`,
+    a recorded one whose test.yaml has a `load_frame` entry."""
+    spec = _spec(test)
+    if "simulate" in spec:
+        return bool(_sim_config(test).get("load_frame"))
+    return "load_frame" in spec["recorded"]
+
+
+def get_load_frame_log(wildcards):
+    """The load-frame log's file: TEST_DIR/loadframe.csv of a simulated test, test.yaml's
+    `load_frame.file` of a recorded one."""
+    test = wildcards.test
+    if not has_load_frame(test):
+        raise WorkflowError(
+            f"test {test!r} has no load-frame log (test.yaml load_frame)"
+        )
+    spec = _spec(test)
+    if "simulate" in spec:
+        return str(Path(get_test_dir(test)) / "loadframe.csv")
+    return str(Path(get_test_dir(test)) / spec["recorded"]["load_frame"]["file"])
+
+
 def get_final_outputs():
     """Everything the default target builds: the kit; per simulated test its test folder and
     simulation_check.json; per recorded test its inventory.json; per test and camera its
     calibration and frame map; per test the labels of every camera's chunk starts, the cameras
     and cell of the first frame (cameras.json and a picture), every processed frame's points,
-    observations, tracks and quality.json, the volume and strains, a few PLY meshes, and the
-    report's figures and movie.
+    observations, tracks and quality.json, the volume and strains (and volume.csv), a few PLY
+    meshes, the membrane's ParaView series, and the report's figures, movie and 3-D viewer; per
+    test with a load-frame log its stress and strain (and stress_strain.csv), the clock report
+    and the stress figures (simulated: the log and its truth).
     """
     outputs = [KIT_DIR]
     for test in SIMULATED:
@@ -574,7 +607,31 @@ def get_final_outputs():
                 "results/{test}/report/specimen.mp4",
                 "results/{test}/report/specimen.html",
                 "results/{test}/reconstruction/reconstruction.png",
+                "results/{test}/volume.csv",
+                "results/{test}/paraview",
+                "results/{test}/report/viewer.html",
             ],
             test=test,
         )
+        if has_load_frame(test):
+            outputs += expand(
+                [
+                    "results/{test}/stress_strain.parquet",
+                    "results/{test}/stress_strain.csv",
+                    "results/{test}/clock.json",
+                    "results/{test}/report/q_strain.png",
+                    "results/{test}/report/volumetric_strain.png",
+                    "results/{test}/report/modulus.png",
+                ],
+                test=test,
+            )
+        if test in SIMULATED and has_load_frame(test):
+            outputs += expand(
+                [
+                    "results/{test}/simulated/loadframe.csv",
+                    "results/{test}/simulated/truth/loadframe.json",
+                    "results/{test}/simulated/truth/stress_strain.parquet",
+                ],
+                test=test,
+            )
     return outputs

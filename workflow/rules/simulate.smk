@@ -164,3 +164,32 @@ rule check_simulation:
         runtime=30,
     script:
         "../scripts/check_simulation.py"
+
+
+rule simulate_load_frame:
+    """Write the simulated load-frame log (loadframe.csv) and its truth (clock offset, stress and
+    strain per frame)."""
+    input:
+        kit="results/{test}/simulated/kit",
+        test_yaml="results/{test}/simulated/test.yaml",
+        scene="results/{test}/simulated/truth/scene.json",
+    output:
+        log="results/{test}/simulated/loadframe.csv",
+        truth="results/{test}/simulated/truth/loadframe.json",
+        stress="results/{test}/simulated/truth/stress_strain.parquet",
+    log:
+        "logs/{test}/simulate_load_frame/simulate_load_frame.log",
+    benchmark:
+        "benchmarks/{test}/simulate_load_frame/simulate_load_frame.tsv"
+    wildcard_constraints:
+        test=SIMULATED_TEST,
+    conda:
+        "../envs/triaxtrack.yaml"
+    threads: 1
+    resources:
+        mem_mb=1000,
+        runtime=10,
+    params:
+        load_frame=get_load_frame_settings,
+    script:
+        "../scripts/simulate_load_frame.py"

@@ -88,6 +88,8 @@ from triaxtrack.simulate.config import (
     SimulationConfig,
     apply_preset,
     camera_names,
+    check_loading_history,
+    loading_progress,
     recorded_frames,
 )
 from triaxtrack.simulate.folder import make_scene, render_chunk, simulate_test
@@ -113,6 +115,7 @@ from triaxtrack.simulate.scene import (
     OCCLUDER_NEWTON_STEPS,
     Scene,
     deformation_for,
+    frame_progress,
     load_scene,
     material_height,
     progress,
@@ -130,7 +133,8 @@ __all__ = [
     "NVR_LENS_BLUR_PX", "OCCLUDER_NEWTON_STEPS", "OCCLUDER_QUADS", "OCCLUDER_ROW_MM", "OCCLUSION_TOL",
     "PEDESTAL_QUADS", "PRESETS", "SUBROWS_INK", "SUBROWS_PLAIN", "Scene", "SimulationConfig", "TILT_STREAM",
     "VIGNETTING", "apply_preset", "board_poses", "camera_names", "camera_pitch_deg", "centroid_errors",
-    "check_simulation", "corner_board_count", "deformation_for", "finish_truth", "load_scene", "look_at",
+    "check_loading_history", "check_simulation", "corner_board_count", "deformation_for", "finish_truth",
+    "frame_progress", "load_scene", "loading_progress", "look_at",
     "make_cameras", "make_scene", "material_height", "progress", "recorded_frames", "render_board_image",
     "render_calibration", "render_chunk", "simulate_test", "target_positions", "tilt_rotation",
     "truth_volume",

@@ -46,8 +46,13 @@ class SimulationConfig:
     # the recorder's keyframe interval (a GOP), seconds: a keyframe every round(gop_s x fps)
     # frames counted from the first, whatever the chunk size (issue 17)
     gop_s: float = 2.0
-    # the simulated load-frame log's settings (triaxtrack.simulate.loadlog; issue 18)
+    # the simulated load-frame log's settings (triaxtrack.simulate.loadlog; issue 18): empty, no
+    # log; any key (e.g. {clock_offset_s: 1.3}) writes loadframe.csv, see LoadFrameSimulation
     load_frame: dict = field(default_factory=dict)
+    # the loading history: knots [u, p] of the progress p (0-1, the deformation's) against the
+    # share u (0-1) of the test's duration, linear between; None: p = u (a constant strain rate).
+    # E.g. a hold and an unload-reload loop: [[0, 0], [0.3, 0.4], [0.4, 0.4], [0.5, 0.39], ...]
+    loading_history: list[list[float]] | None = None
     # per camera (by name): test-clock time of its first frame, a whole number of frames >= 0
     # (the camera started late), and the nominal frame numbers it dropped (triaxtrack.frames)
     start_offset_s: dict[str, float] = field(default_factory=dict)
@@ -76,6 +81,8 @@ class SimulationConfig:
                 d = {**d, "occluder_z_mm": (float(z[0]), float(z[1]))}
             except (TypeError, ValueError):
                 raise ValueError(f"occluder_z_mm must be null or [z0, z1] in mm, not {z!r}") from None
+        if d.get("loading_history") is not None:
+            d = {**d, "loading_history": check_loading_history(d["loading_history"])}
         cfg = SimulationConfig(**d)
         _check_effects(cfg)
         if cfg.codec not in ("h264", "h265"):
@@ -141,6 +148,40 @@ def _check_effects(cfg: SimulationConfig) -> None:
     z = cfg.occluder_z_mm
     if z is not None and not (np.isfinite(z).all() and z[0] < z[1]):
         raise ValueError(f"occluder_z_mm must be [z0, z1] with z0 < z1, mm, not {list(z)}")
+
+
+def check_loading_history(knots) -> list[list[float]]:
+    """``knots`` as a list of ``[u, p]`` floats (ValueError naming ``loading_history`` unless
+    u rises strictly from 0 to 1 and every p is in [0, 1])."""
+    msg = "loading_history must be null or a list of [u, p] knots, u rising strictly from 0 to 1, p in [0, 1]"
+    try:
+        arr = np.asarray(knots, dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(f"{msg}, not {knots!r}") from None
+    if (
+        arr.ndim != 2
+        or arr.shape[1] != 2
+        or len(arr) < 2
+        or not np.isfinite(arr).all()
+        or arr[0, 0] != 0
+        or arr[-1, 0] != 1
+        or np.any(np.diff(arr[:, 0]) <= 0)
+        or np.any((arr[:, 1] < 0) | (arr[:, 1] > 1))
+    ):
+        raise ValueError(f"{msg}, not {knots!r}")
+    return arr.tolist()
+
+
+def loading_progress(cfg: SimulationConfig, time_s: float | np.ndarray) -> np.ndarray:
+    """Loading progress p (0-1) at test-clock times ``time_s`` (s; frame k at k / fps): the share
+    of the test's duration ``u = time_s fps / (frames - 1)``, clipped to [0, 1] (before the first
+    frame and after the last the specimen rests), through ``loading_history`` (p = u without one).
+    """
+    u = np.clip(np.asarray(time_s, float) * cfg.fps / (cfg.frames - 1), 0.0, 1.0)
+    if cfg.loading_history is None:
+        return u
+    knots = np.asarray(cfg.loading_history, float)
+    return np.interp(u, knots[:, 0], knots[:, 1])
 
 
 def camera_names(n: int) -> list[str]:

@@ -15,6 +15,7 @@ from triaxtrack.kit import load_kit_design
 from triaxtrack.simulate.boards import render_calibration
 from triaxtrack.simulate.cameras import make_cameras
 from triaxtrack.simulate.config import SimulationConfig, camera_names, recorded_frames
+from triaxtrack.simulate.loadlog import load_frame_entry, write_load_frame
 from triaxtrack.simulate.render import CameraRenderer
 from triaxtrack.simulate.scene import deformation_for, load_scene
 from triaxtrack.simulate.truth import finish_truth, truth_volume
@@ -25,8 +26,10 @@ from triaxtrack.video import VideoWriter
 def make_scene(cfg: SimulationConfig, kit_dir: str | Path, test_dir: str | Path, name: str) -> None:
     """Write the static part of a simulated test folder.
 
-    ``test.yaml``, ``kit/`` (a copy of the kit export), ``truth/scene.json`` (how to rebuild
-    the scene), ``truth/cameras.json`` and ``truth/volume.parquet``. Videos, calibration
+    ``test.yaml`` (with its ``load_frame`` entry when the settings have one), ``kit/`` (a copy
+    of the kit export), ``truth/scene.json`` (how to rebuild the scene), ``truth/cameras.json``
+    and ``truth/volume.parquet``. The load-frame log is written by :func:`write_load_frame`.
+    Videos, calibration
     images and the per-target truth are written by :func:`render_chunk`,
     :func:`render_calibration` and :func:`finish_truth`.
     """
@@ -44,14 +47,18 @@ def make_scene(cfg: SimulationConfig, kit_dir: str | Path, test_dir: str | Path,
                 f"camera {cam.name} at z = {cam.center[2]:.1f} mm is not between the pedestal faces "
                 f"(0 and {lowest_top:.1f} mm at the end of loading): lower camera_height_mm"
             )
-    (test_dir / "test.yaml").write_text(yaml.safe_dump({
+    test_yaml = {
         "name": name,
         "fps": float(cfg.fps),
         "frames": int(cfg.frames),
         "cameras": [_test_yaml_camera(cfg, c.name) for c in cams],
         "kit": "kit",
         "simulated": True,
-    }, sort_keys=False))  # fmt: skip
+    }
+    log_entry = load_frame_entry(cfg)  # the log itself: write_load_frame
+    if log_entry is not None:
+        test_yaml["load_frame"] = log_entry
+    (test_dir / "test.yaml").write_text(yaml.safe_dump(test_yaml, sort_keys=False, allow_unicode=True))
     (test_dir / "truth" / "scene.json").write_text(json.dumps({
         "name": name,
         "simulation": asdict(cfg),
@@ -136,4 +143,6 @@ def simulate_test(
         concat_videos(segs, test_dir / "videos" / f"{cam}.mp4")
         render_calibration(test_dir, cam, test_dir / "calibration" / cam)
     finish_truth(test_dir, parts)
+    if cfg.load_frame:
+        write_load_frame(test_dir)
     shutil.rmtree(work)

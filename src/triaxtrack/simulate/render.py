@@ -12,7 +12,7 @@ from triaxtrack import footage
 from triaxtrack.kit import ShapeSet, surface_by_name
 from triaxtrack.optics import project_air, project_water
 from triaxtrack.raster import paint_into
-from triaxtrack.simulate.scene import Scene, _surface_points, material_height, progress
+from triaxtrack.simulate.scene import Scene, _surface_points, frame_progress, material_height, progress
 
 # grey levels of the materials (8-bit, before lighting and noise)
 GREY_BACKGROUND = 40.0
@@ -227,7 +227,7 @@ class CameraRenderer:
     def render(self, frame: int) -> tuple[np.ndarray, pd.DataFrame]:
         """The camera's uint8 grey image at ``frame`` and the exact observations it holds."""
         sc, cam = self.scene, self.cam
-        p = progress(frame, sc.cfg.frames)
+        p = frame_progress(frame, sc.cfg)
         h, w = cam.height, cam.width
         img = np.full((h, w), GREY_BACKGROUND)
         layers = self._base_layers(p)

@@ -14,7 +14,7 @@ import pandas as pd
 from triaxtrack.deformation import Deformation
 from triaxtrack.kit import ShapeSet, load_kit_design, printed_shapes, surface_by_name, target_table
 from triaxtrack.optics import Camera, CellOptics, cell_optics, read_cameras
-from triaxtrack.simulate.config import SimulationConfig
+from triaxtrack.simulate.config import SimulationConfig, loading_progress
 
 OCCLUDER_NEWTON_STEPS = 3  # fixed-point steps from the soil-surface height to the printed surface's
 
@@ -33,8 +33,15 @@ def deformation_for(cfg: SimulationConfig, design: dict) -> Deformation:
 
 
 def progress(frame: int, frames: int) -> float:
-    """Loading progress of a frame: 0 at the first, 1 at the last (constant strain rate)."""
+    """Share of the test's duration at a frame: 0 at the first, 1 at the last (the loading
+    progress of a constant strain rate; :func:`frame_progress` follows ``loading_history``)."""
     return frame / (frames - 1)
+
+
+def frame_progress(frame: int, cfg: SimulationConfig) -> float:
+    """Loading progress p of a frame (the deformation's): ``progress`` through the config's
+    ``loading_history`` (:func:`~triaxtrack.simulate.config.loading_progress`)."""
+    return float(loading_progress(cfg, frame / cfg.fps))
 
 
 @dataclass

@@ -10,7 +10,7 @@ import pandas as pd
 
 from triaxtrack.deformation import Deformation
 from triaxtrack.simulate.config import SimulationConfig
-from triaxtrack.simulate.scene import Scene, _surface_points, load_scene, progress
+from triaxtrack.simulate.scene import Scene, _surface_points, frame_progress, load_scene
 from triaxtrack.tables import OBSERVATIONS, POINTS, read_table, write_table
 
 
@@ -18,8 +18,8 @@ def truth_volume(cfg: SimulationConfig, deformation: Deformation) -> pd.DataFram
     """Exact soil volume and strains at every frame."""
     frames = np.arange(cfg.frames)
     v0 = deformation.soil_volume(0.0)
-    vol = np.array([deformation.soil_volume(progress(k, cfg.frames)) for k in frames])
-    h = np.array([deformation.current_height(progress(k, cfg.frames)) for k in frames])
+    vol = np.array([deformation.soil_volume(frame_progress(k, cfg)) for k in frames])
+    h = np.array([deformation.current_height(frame_progress(k, cfg)) for k in frames])
     return pd.DataFrame({
         "frame": frames.astype(np.int64),
         "time_s": frames / cfg.fps,
@@ -31,7 +31,7 @@ def truth_volume(cfg: SimulationConfig, deformation: Deformation) -> pd.DataFram
 
 def target_positions(scene: Scene, frame: int) -> pd.DataFrame:
     """Cell-frame centre (x, y, z) of every target at a frame (membrane: printed surface)."""
-    p = progress(frame, scene.cfg.frames)
+    p = frame_progress(frame, scene.cfg)
     t = scene.table
     xyz = np.zeros((len(t), 3))
     for surface, sel in t.groupby("surface").groups.items():

@@ -1,0 +1,92 @@
+"""Stress and strain from a load-frame log on the measured specimen (issue 18).
+
+* :mod:`~triaxtrack.stress.log`: reading the log as test.yaml maps it (:func:`read_load_frame_log`);
+* :mod:`~triaxtrack.stress.clock`: the log's clock offset from the displacements
+  (:func:`estimate_clock_offset`);
+* :mod:`~triaxtrack.stress.sections`: mid-height and smallest horizontal sections of the measured
+  soil surface (:func:`section_areas`);
+* :mod:`~triaxtrack.stress.compute`: q on each area, the lab's standard q, corrections, p, p',
+  moduli and uncertainties (:func:`stress_strain`);
+* :func:`measure_stress`: all of it for one test.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pandas as pd
+
+from triaxtrack.stress.clock import ClockEstimate, estimate_clock_offset, offset_warning
+from triaxtrack.stress.compute import StressConfig, noise_sigma, stress_strain
+from triaxtrack.stress.log import QUANTITIES, read_load_frame_log
+from triaxtrack.stress.sections import SECTION_LEVELS, SECTION_MARGIN, section_areas
+from triaxtrack.tables import STRESS_STRAIN, conform
+
+
+def measure_stress(
+    test_dir: str | Path,
+    test_yaml: dict,
+    volume: pd.DataFrame,
+    points: pd.DataFrame,
+    table: pd.DataFrame,
+    design: dict,
+    config: StressConfig | None = None,
+    volume_settings: dict | None = None,
+) -> tuple[pd.DataFrame, dict]:
+    """The stress-strain table (:data:`~triaxtrack.tables.STRESS_STRAIN`) of a test whose
+    test.yaml (``test_yaml``, a mapping) has a ``load_frame`` entry, and the clock report:
+    ``estimated_offset_s``, its ``sigma_s``, ``residual_mm``, ``scale``, the ``given_offset_s``
+    (None when test.yaml gives none), the ``used_offset_s`` (the given one if any, else the
+    estimate) and a ``warning`` ('' or why). ``volume_settings``: config ``volume``
+    (membrane thickness, its model, max missing share) for the sections."""
+    config = config or StressConfig()
+    entry = test_yaml["load_frame"]
+    log = read_load_frame_log(test_dir, entry)
+    fps = float(test_yaml["fps"])
+    ok = volume["height_mm"].notna()
+    ref = volume["reference_frame"].dropna()
+    if not ok.any() or not len(ref):
+        raise ValueError(f"{test_dir}: no frame has a volume: no stress can be measured")
+    h_ref = float(volume.loc[volume["frame"] == int(ref.iloc[0]), "height_mm"].iloc[0])
+    estimate = estimate_clock_offset(
+        log["log_time_s"].to_numpy(), log["axial_displacement_mm"].to_numpy(),
+        volume.loc[ok, "time_s"].to_numpy(), h_ref - volume.loc[ok, "height_mm"].to_numpy(),
+        search_s=config.search_s,
+    )  # fmt: skip
+    given = entry.get("clock_offset_s")
+    used = estimate.offset_s if given is None else float(given)
+    vs = volume_settings or {}
+    sections = section_areas(
+        points, table, design, int(ref.iloc[0]), t0=vs.get("membrane_thickness_mm"),
+        thickness_model=vs.get("thickness_model", "area"), margin=config.section_margin,
+        levels=config.section_levels,
+        **({"max_missing_share": vs["max_missing_share"]} if "max_missing_share" in vs else {}),
+    )  # fmt: skip
+    out = stress_strain(
+        volume, sections, log, used, design, config, offset_sigma_s=estimate.sigma_s if given is None else 0.0
+    )
+    report = {
+        "estimated_offset_s": estimate.offset_s,
+        "sigma_s": estimate.sigma_s,
+        "residual_mm": estimate.residual_mm,
+        "scale": estimate.scale,
+        "zero_mm": estimate.zero_mm,
+        "frames_used": estimate.frames_used,
+        "search_s": list(estimate.search_s),
+        "given_offset_s": None if given is None else float(given),
+        "used_offset_s": used,
+        "fps": fps,
+        "zero_time_s": out.attrs.get("zero_time_s"),
+        "load_noise_n": noise_sigma(log["axial_load_n"].to_numpy()),
+        "warning": offset_warning(estimate, given, fps),
+        "log_rows": len(log),
+        "log_span_s": [float(log["log_time_s"].iloc[0]), float(log["log_time_s"].iloc[-1])],
+    }
+    return conform(out, STRESS_STRAIN, "stress_strain"), report
+
+
+__all__ = [
+    "QUANTITIES", "SECTION_LEVELS", "SECTION_MARGIN", "ClockEstimate", "StressConfig",
+    "estimate_clock_offset", "measure_stress", "noise_sigma", "offset_warning", "read_load_frame_log",
+    "section_areas", "stress_strain",
+]  # fmt: skip
