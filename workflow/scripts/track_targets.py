@@ -3,7 +3,7 @@
 import yaml
 
 from triaxtrack.codec_lag import lag_corrected
-from triaxtrack.frames import iter_test_frames, keyframe_test_frames
+from triaxtrack.frames import ProcessedTestFrames, iter_test_frames, keyframe_test_frames
 from triaxtrack.logs import log_to
 from triaxtrack.tables import FRAME_MAP, LABELS, TRACKS, read_table, write_table
 from triaxtrack.timesteps import tracking_summary
@@ -17,9 +17,18 @@ labels = read_table(snakemake.input.labels, LABELS)
 fps = float(yaml.safe_load(open(snakemake.input.test_yaml))["fps"])
 camera = snakemake.wildcards.camera
 plan = chunk_frames(labels, fmap, fps, snakemake.params.chunk, cfg, snakemake.input.labels)
-frames = iter_test_frames(snakemake.input.video, fmap, plan.first, plan.end)
+fast = cfg.step_s is not None and snakemake.params.tracking["fast"]
+if fast:  # decode only the processed frames; follow the targets across the others
+    frames = ProcessedTestFrames(snakemake.input.video, fmap, plan.first, plan.end, plan.report)
+else:
+    frames = iter_test_frames(snakemake.input.video, fmap, plan.first, plan.end)
 tracks = track_frames(frames, labels, camera, plan.report, cfg)
-if snakemake.params.tracking["codec_lag"]:
+if fast:
+    print(f"{camera}: fast mode: {frames.decoded} frames decoded ({frames.seeks} seeks) for "
+          f"{len(plan.report)} processed of frames {plan.first}..{plan.end - 1}")  # fmt: skip
+if snakemake.params.tracking["codec_lag"] and fast:
+    print(f"{camera}: codec lag not corrected: fast mode decodes no P frames around the keyframes")
+elif snakemake.params.tracking["codec_lag"]:
     keys = keyframe_test_frames(snakemake.input.video, fmap, plan.first, plan.end)
     tracks, lags = lag_corrected(tracks, keys)
     print(f"{camera}: P frames against keyframes {keys.tolist()} (triaxtrack.codec_lag):")
