@@ -38,6 +38,6 @@ def small_test(kit_dir, tmp_path_factory) -> Path:
     cfg = SimulationConfig(
         cameras=3, frames=4, width=960, height=540, calibration_images=3, axial_strain=0.08,
         gop_s=2 / 15,
-    )
+    )  # fmt: skip
     simulate_test(cfg, kit_dir, out, "small", chunk_size=2)
     return out
