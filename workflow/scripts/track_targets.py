@@ -1,5 +1,7 @@
 """Rule track_targets: follow one camera's labelled targets through one chunk."""
 
+import time
+
 import yaml
 
 from triaxtrack.codec_lag import lag_corrected
@@ -22,10 +24,12 @@ if fast:  # decode only the processed frames; follow the targets across the othe
     frames = ProcessedTestFrames(snakemake.input.video, fmap, plan.first, plan.end, plan.report)
 else:
     frames = iter_test_frames(snakemake.input.video, fmap, plan.first, plan.end)
+t0 = time.perf_counter()
 tracks = track_frames(frames, labels, camera, plan.report, cfg)
-if fast:
-    print(f"{camera}: fast mode: {frames.decoded} frames decoded ({frames.seeks} seeks) for "
-          f"{len(plan.report)} processed of frames {plan.first}..{plan.end - 1}")  # fmt: skip
+seconds = time.perf_counter() - t0
+mode = f"fast mode: {frames.decoded} frames decoded ({frames.seeks} seeks)" if fast else "every frame decoded"
+print(f"{camera}: {mode} for {len(plan.report)} reported of frames {plan.first}..{plan.end - 1}: "
+      f"decoding and tracking {seconds:.2f} s")  # fmt: skip
 if snakemake.params.tracking["codec_lag"] and fast:
     print(f"{camera}: codec lag not corrected: fast mode decodes no P frames around the keyframes")
 elif snakemake.params.tracking["codec_lag"]:
