@@ -715,7 +715,10 @@ class SparseFrames:
         keys = _keyframes_from(self.path, int(wanted[0]), int(wanted[-1]) + 1)
         with _open_input(self.path) as container:
             stream = container.streams.video[0]
-            stream.thread_type = "AUTO"
+            # no frame threading: it decodes packets ahead of each frame it gives, which a seek
+            # then throws away (on the slow test's 720p H.264 the 49 frames of 20 GOPs took 1.39 s
+            # with "AUTO", 0.91 s with "SLICE")
+            stream.thread_type = "SLICE"
             clock = (_stream_fps(stream, self.path), Fraction(stream.time_base), int(stream.start_time or 0))
             try:
                 if np.array_equal(wanted, keys[keys >= wanted[0]]):  # every keyframe, nothing else
