@@ -30,12 +30,14 @@ def kit_dir(design, tmp_path_factory) -> Path:
 
 @pytest.fixture(scope="session")
 def small_test(kit_dir, tmp_path_factory) -> Path:
-    """3 cameras x 4 frames at 960x540, chunks of 3 frames (so two segments are joined)."""
+    """3 cameras x 4 frames at 960x540, a GOP of 2 frames and chunks of 2 (so two video
+    segments are joined, each starting on the GOP grid)."""
     from triaxtrack.simulate import SimulationConfig, simulate_test
 
     out = tmp_path_factory.mktemp("sim") / "small"
     cfg = SimulationConfig(
-        cameras=3, frames=4, width=960, height=540, calibration_images=3, axial_strain=0.08
-    )
-    simulate_test(cfg, kit_dir, out, "small", chunk_size=3)
+        cameras=3, frames=4, width=960, height=540, calibration_images=3, axial_strain=0.08,
+        gop_s=2 / 15,
+    )  # fmt: skip
+    simulate_test(cfg, kit_dir, out, "small", chunk_size=2)
     return out

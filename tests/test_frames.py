@@ -13,6 +13,7 @@ import yaml
 
 from triaxtrack.frames import (
     CameraTiming,
+    ProcessedTestFrames,
     count_test_frames,
     frame_map,
     iter_test_frames,
@@ -241,3 +242,33 @@ def test_keyframes_as_test_frames_through_the_frame_map(tmp_path):
     assert [int(shown[k]) for k in (2, 7, 13, 18)] == [0, 5, 10, 15]
     assert keyframe_test_frames(path, fmap, 0, 22).tolist() == [2, 7, 13, 18]
     assert keyframe_test_frames(path, fmap, 8, 14).tolist() == [13]
+
+
+def test_fast_mode_decodes_only_the_processed_frames(tmp_path):
+    """ProcessedTestFrames: at the processed frames (and the first, the labelled one) the very
+    images of full decoding, None at every other frame, in the same order; far fewer frames
+    decoded (counted). The camera starts at test frame 2 and dropped its nominal frame 6 (test
+    frame 8); keyframes every 5 video frames (test frames 2, 7, 13, 18, 23)."""
+    path = tmp_path / "gop.mp4"
+    rng = np.random.default_rng(5)
+    with VideoWriter(path, 64, 48, FPS, gop=5, recorder=True) as w:
+        for k in range(25):
+            img = rng.integers(60, 200, (48, 64)).astype(np.uint8)  # noise: every frame differs
+            img[20:28, 10 + k : 18 + k] = 20
+            w.write(img, keyframe=k % 5 == 0)
+    fmap = frame_map(CameraTiming("cam01", FPS, start_offset_s=0.2, dropped_frames=(6,)), 28, 25)
+    assert keyframe_test_frames(path, fmap, 0, 28).tolist() == [2, 7, 13, 18, 23]
+    full = [(k, None if img is None else img.copy()) for k, img in iter_test_frames(path, fmap, 1, 28)]
+    processed = [7, 8, 9, 18, 24, 30]  # 8 was dropped; 30 is past the range
+    fast = ProcessedTestFrames(path, fmap, 1, 28, processed)
+    got = [(k, None if img is None else img.copy()) for k, img in fast]
+    assert [k for k, _ in got] == [k for k, _ in full] == list(range(1, 28))
+    shown = {1, 7, 9, 18, 24}  # and 1, the first (labelled) frame, but the camera starts at 2
+    for (k, img), (_, ref) in zip(got, full, strict=True):
+        if k in shown and ref is not None:
+            assert np.array_equal(img, ref), f"test frame {k}"
+        else:
+            assert img is None, f"test frame {k}"
+    # 7 (a keyframe) and 9 (decoded on); 18 (a keyframe); 24 from keyframe 23; against 25
+    assert (fast.decoded, fast.seeks) == (2 + 1 + 2, 3)
+    assert fast.decoded < sum(img is not None for _, img in full) == 25

@@ -12,9 +12,18 @@ import yaml
 from triaxtrack.centroid import local_centroid
 from triaxtrack.optics import Camera, project_air
 from triaxtrack.raster import circle_polygon, packed_polygon_coverage
-from triaxtrack.simulate import CameraRenderer, SimulationConfig, check_simulation, load_scene
+from triaxtrack.simulate import (
+    CameraRenderer,
+    SimulationConfig,
+    check_simulation,
+    gop_frames,
+    load_scene,
+    make_scene,
+    render_chunk,
+    render_segments,
+)
 from triaxtrack.tables import OBSERVATIONS, POINTS, VOLUME, read_table
-from triaxtrack.video import probe_video
+from triaxtrack.video import concat_videos, keyframe_indices, probe_video
 
 
 def test_flat_dot_head_on_centroid_within_0p02_px():
@@ -336,3 +345,35 @@ def test_camera_tilt_stays_within_bounds():
         assert up == pytest.approx(pitch, abs=0.05)
         pitches.append(pitch)
     assert max(np.abs(pitches)) <= 4.0 and np.ptp(pitches) > 4.0
+
+
+def test_render_segments_start_on_the_gop_grid():
+    assert render_segments(100, 50, 30) == [(0, 60), (60, 100)]
+    assert render_segments(10, 4, 30) == [(0, 10)]
+    assert render_segments(90, 30, 30) == [(0, 30), (30, 60), (60, 90)]
+    assert render_segments(13, 3, 4) == [(0, 4), (4, 8), (8, 12), (12, 13)]
+    assert gop_frames(SimulationConfig(fps=15.0, gop_s=2.0)) == 30
+    assert gop_frames(SimulationConfig(fps=25.0, gop_s=0.01)) == 1
+    with pytest.raises(ValueError, match="gop_s"):
+        SimulationConfig.from_dict({"gop_s": 0})
+
+
+def test_small_test_videos_have_keyframes_on_the_gop_grid(small_test):
+    """Two joined segments of 2 frames, GOP 2: keyframes at 0 and 2 only."""
+    for camera in ("cam01", "cam03"):
+        assert keyframe_indices(small_test / "videos" / f"{camera}.mp4").tolist() == [0, 2]
+
+
+@pytest.mark.parametrize("chunk_size", [3, 5, 8])
+def test_gop_grid_whatever_the_chunk_size(kit_dir, tmp_path, chunk_size):
+    """A recorder's keyframes: every round(gop_s x fps) = 4 frames from frame 0, and nowhere
+    else, whether the chunks are shorter than a GOP, not a multiple of it, or two GOPs."""
+    cfg = SimulationConfig(cameras=1, frames=14, width=320, height=180, gop_s=4 / 15, calibration_images=1)
+    make_scene(cfg, kit_dir, tmp_path / "t", "gop")
+    segments = []
+    for i, (start, stop) in enumerate(render_segments(cfg.frames, chunk_size, gop_frames(cfg))):
+        segments.append(tmp_path / f"{i}.mp4")
+        render_chunk(tmp_path / "t", "cam01", start, stop, segments[-1], tmp_path / f"{i}.parquet")
+    n = concat_videos(segments, tmp_path / "cam01.mp4")
+    assert n == 14
+    assert keyframe_indices(tmp_path / "cam01.mp4").tolist() == [0, 4, 8, 12]

@@ -10,10 +10,13 @@ import numpy as np
 import pytest
 
 from triaxtrack.video import (
+    SparseFrames,
     VideoWriter,
+    _encoder_options,
     concat_videos,
     encode_video,
     iter_frames,
+    keyframe_indices,
     probe_video,
     read_frame,
 )
@@ -239,3 +242,55 @@ def test_limited_range_frames_are_converted(tmp_path: Path):
     ref = _gray_by_conversion(path)
     assert len(got) == 3 and all(np.array_equal(a, b) for a, b in zip(got, ref, strict=True))
     assert min(int(img.min()) for img in got) < 16  # stretched: the raw luma plane holds 16..235
+
+
+@pytest.mark.parametrize("codec", ["h264", "h265"])
+def test_recorder_puts_keyframes_where_asked_and_every_gop_after(
+    tmp_path: Path, originals: list[np.ndarray], codec: str
+):
+    """recorder=True: an IDR where write(keyframe=True) says (even 2 frames after the last),
+    else gop frames after the last keyframe; no scene-cut keyframes (the disc jumps 4 px and the
+    frame-number bars change every frame); and no mb-tree / cutree."""
+    path = tmp_path / f"rec_{codec}.mp4"
+    with VideoWriter(path, W, H, FPS, codec=codec, gop=12, recorder=True) as w:
+        for k, img in enumerate(originals):
+            w.write(img, keyframe=k in (2, 9))
+    assert keyframe_indices(path).tolist() == [0, 2, 9, 21]
+    for k, img in iter_frames(path):
+        assert_matches(k, img, originals)
+    tree = {"h264": "mbtree=0", "h265": "cutree=0"}[codec]
+    params = _encoder_options(codec, 14, "veryfast", 12, recorder=True)[f"x{codec[1:]}-params"]
+    assert tree in params.split(":") and "scenecut=0" in params.split(":")
+    assert tree not in _encoder_options(codec, 14, "veryfast", 12)[f"x{codec[1:]}-params"]
+
+
+@pytest.mark.parametrize("codec", ["h264", "h265"])
+def test_sparse_frames_are_the_decoded_frames_and_cost_fewer_decodes(
+    tmp_path: Path, originals: list[np.ndarray], codec: str
+):
+    """SparseFrames gives exactly the frames full decoding gives at the indices asked for, and
+    decodes (counted, not timed) one frame per keyframe asked for, and from the keyframe at or
+    before any other frame."""
+    path = tmp_path / f"sparse_{codec}.mp4"
+    with VideoWriter(path, W, H, FPS, codec=codec, gop=5, recorder=True) as w:
+        for k, img in enumerate(originals):
+            w.write(img, keyframe=k % 5 == 0)
+    assert keyframe_indices(path).tolist() == [0, 5, 10, 15, 20]
+    full = {k: img.copy() for k, img in iter_frames(path)}
+    cases = [  # wanted, frames decoded, seeks
+        ([0, 5, 10, 15, 20], 5, 1),  # every keyframe: skip_frame NONKEY after one seek
+        ([5, 15], 2, 2),  # some keyframes: a seek to each
+        ([3, 5, 13, 24], 4 + 1 + 4 + 5, 4),  # from the keyframe at or before each
+        ([7, 8, 9], 5, 1),  # one GOP: decoded on
+        ([24], 5, 1),
+    ]
+    for wanted, decoded, seeks in cases:
+        reader = SparseFrames(path, wanted)
+        got = [(k, img.copy()) for k, img in reader]
+        assert [k for k, _ in got] == wanted
+        for k, img in got:
+            assert np.array_equal(img, full[k]), f"frame {k}"
+        assert (reader.decoded, reader.seeks) == (decoded, seeks), wanted
+    assert list(SparseFrames(path, [])) == []
+    with pytest.raises(ValueError, match="no frame 25"):
+        list(SparseFrames(path, [3, 25]))

@@ -122,7 +122,9 @@ def test_simulated_jobs_are_cameras_times_chunks(tmp_path):
         },
     )
     counts = dry_run("--configfile", str(config))
-    assert counts["render_video_chunk"] == 3 * 3  # chunks 0000..0002: 4 + 4 + 2 frames
+    # video segments are whole GOPs (gop_s 2 at 15 fps: 30 frames): one per camera here
+    assert counts["render_video_chunk"] == 3 * 1
+    assert counts["identify_targets"] == counts["track_targets"] == 3 * 3  # chunks: 4 + 4 + 2 frames
     assert counts["join_camera_video"] == 3
     assert counts["render_calibration"] == 3
     assert counts["simulate_truth"] == 1
@@ -163,7 +165,7 @@ def test_simulated_and_recorded_tests_together(tmp_path):
         },
     )
     counts = dry_run("--configfile", str(config))
-    assert counts["render_video_chunk"] == 4 * 3
+    assert counts["render_video_chunk"] == 4 * 2  # segments of 60 frames (2 GOPs >= chunk_size 50)
     assert counts["probe_video"] == 3
     assert counts["calibrate_camera"] == counts["frame_map"] == 4 + 3
     assert counts["identify_targets"] == counts["track_targets"] == 4 * 3 + 3 * 2  # per camera and chunk
@@ -288,7 +290,8 @@ def test_small_simulation_end_to_end_then_inventory(tmp_path):
     proc = run_snakemake("--cores", "2", "--configfile", str(config), workdir=work, timeout=None)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     counts = job_counts(proc.stdout + proc.stderr)
-    assert counts["render_video_chunk"] == counts["identify_targets"] == counts["track_targets"] == 13 * 2
+    assert counts["identify_targets"] == counts["track_targets"] == 13 * 2
+    assert counts["render_video_chunk"] == 13  # one video segment: a GOP is 30 frames
     assert counts["reconstruct_cell"] == counts["trace_specimen"] == 1
     results = work / "results" / "small"
     test_dir = results / "simulated"

@@ -3,7 +3,8 @@
 ``tracking`` (the default): the first ``--frames`` frames (default 24) of one camera of a simulated
 ``--test-frames``-frame test (default 100, as the workflow's demo: the dots move as fast per frame)
 are rendered at ``--size`` (default 3840x2160) and written as H.264 (the simulation defaults: crf 14,
-veryfast), and the same frames re-encoded as H.265 (``--codecs``; all in a child process); this prints
+veryfast, as a recorder: a keyframe every ``--gop`` frames, default 6), and the same frames
+re-encoded as H.265 (``--codecs``; all in a child process); this prints
 
 * per codec, the decode-only frame rate (decoding to grey frames as the pipeline does,
   :func:`triaxtrack.frames.iter_test_frames`), and the whole pipeline's (decoding and
@@ -13,6 +14,13 @@ veryfast), and the same frames re-encoded as H.265 (``--codecs``; all in a child
 * the tracking cost per camera-frame beyond decoding: (pipeline - decode) / frames, and timed
   directly on a few frames held in memory (``--hold``), with the share of ``_step`` and
   ``measure_targets``;
+* per codec, the cost per processed frame in fast mode (processed frames on every keyframe, one
+  step a GOP: :class:`triaxtrack.frames.ProcessedTestFrames` and ``track_frames``, the frames
+  decoded counted) against every-frame mode (the pipeline's time over the same processed
+  frames), and how far apart their centroids are at the processed frames;
+* from those per-frame costs, the wall time to track a 3.3 h test of 16 cameras at 15 fps (at
+  the bench's frame size) on 2 and on 64 cores: every frame, and one frame per 2 s (fast mode;
+  every-frame mode costs as much as every frame);
 * the brute-force alternative: ``label_frame`` (detection and identification) on every frame;
 * the same linking step by trackpy (``trackpy.link`` on every frame's ``detect_blobs``; optional:
   ``pip install -e '.[bench]'``), with how many of its links break or swap our IDs;
@@ -145,7 +153,7 @@ def _log(msg: str) -> None:
 
 
 def _simulate_clip(tmp: str, width: str, height: str, frames: str, test_frames: str, seed: str,
-                   h265: str) -> None:  # fmt: skip
+                   h265: str, gop: str) -> None:  # fmt: skip
     """Run in a child process by :func:`_render_video` (arguments as strings): export the kit,
     write the scene and render the clip of the first camera (and re-encode it as H.265)."""
     from triaxtrack.kit import export_kit, load_design
@@ -154,36 +162,39 @@ def _simulate_clip(tmp: str, width: str, height: str, frames: str, test_frames: 
 
     root = Path(tmp)
     export_kit(load_design(KIT_DESIGN), root / "kit")
-    cfg = _clip_config(int(width), int(height), int(frames), int(test_frames), int(seed))
+    cfg = _clip_config(int(width), int(height), int(frames), int(test_frames), int(seed), int(gop))
     make_scene(cfg, root / "kit", root / "test", "bench")
     camera = camera_names(cfg.cameras)[0]
     render_chunk(root / "test", camera, 0, int(frames), root / "video.mp4", root / "truth.parquet")
     if h265 == "1":
-        with VideoWriter(root / "video265.mp4", cfg.width, cfg.height, cfg.fps, "h265", cfg.crf) as writer:
-            for _, img in iter_frames(root / "video.mp4"):
-                writer.write(img)
+        with VideoWriter(root / "video265.mp4", cfg.width, cfg.height, cfg.fps, "h265", cfg.crf,
+                         gop=int(gop), recorder=True) as writer:  # fmt: skip
+            for k, img in iter_frames(root / "video.mp4"):
+                writer.write(img, keyframe=k % int(gop) == 0)
 
 
-def _clip_config(width: int, height: int, frames: int, test_frames: int, seed: int):
+def _clip_config(width: int, height: int, frames: int, test_frames: int, seed: int, gop: int):
     from triaxtrack.simulate import SimulationConfig
 
-    return SimulationConfig(frames=max(frames, test_frames), width=width, height=height, seed=seed)
+    fps = SimulationConfig().fps
+    return SimulationConfig(frames=max(frames, test_frames), width=width, height=height, seed=seed,
+                            gop_s=gop / fps)  # fmt: skip
 
 
 def _render_video(tmp: Path, width: int, height: int, frames: int, test_frames: int, seed: int,
-                  h265: bool = False) -> dict:  # fmt: skip
+                  h265: bool = False, gop: int = 6) -> dict:  # fmt: skip
     """The first ``frames`` frames of one camera of a simulated test of ``test_frames`` frames (the
     simulation defaults otherwise: the dots move as fast per frame as in the workflow's demo), and
     with ``h265`` the same frames re-encoded as H.265, made in a child process (the kit export's
     and renderer's memory do not count in this one's)."""
     from triaxtrack.simulate import camera_names
 
-    cfg = _clip_config(width, height, frames, test_frames, seed)
+    cfg = _clip_config(width, height, frames, test_frames, seed, gop)
     camera = camera_names(cfg.cameras)[0]
     _log(f"rendering {frames} frames of {camera} at {width}x{height} ...")
     t0 = time.perf_counter()
     code = "import sys; from triaxtrack.bench import _simulate_clip; _simulate_clip(*sys.argv[1:])"
-    argv = [str(x) for x in (tmp, width, height, frames, test_frames, seed, int(h265))]
+    argv = [str(x) for x in (tmp, width, height, frames, test_frames, seed, int(h265), gop)]
     subprocess.run([sys.executable, "-c", code, *argv], check=True)
     return {"cfg": cfg, "camera": camera, "test": tmp / "test", "video": tmp / "video.mp4",
             "video265": tmp / "video265.mp4", "observations": tmp / "truth.parquet",
@@ -245,11 +256,18 @@ def _link_errors(linked: pd.DataFrame, tracks: pd.DataFrame, tol_px: float = 1.0
 
 
 def bench_tracking(width: int, height: int, frames: int, hold: int = 6, test_frames: int = 100,
-                   seed: int = 1, repeat: int = 3, codecs: tuple = ("h264", "h265")) -> dict:  # fmt: skip
+                   seed: int = 1, repeat: int = 3, codecs: tuple = ("h264", "h265"),
+                   gop: int = 6) -> dict:  # fmt: skip
     """Decode vs decode + tracking on one simulated camera's video (module docstring)."""
     import triaxtrack.track as track
     from triaxtrack.detect import detect_blobs
-    from triaxtrack.frames import CameraTiming, frame_map, iter_test_frames
+    from triaxtrack.frames import (
+        CameraTiming,
+        ProcessedTestFrames,
+        frame_map,
+        iter_test_frames,
+        keyframe_test_frames,
+    )
     from triaxtrack.identify import label_frame
     from triaxtrack.kit import ct_codes, load_kit_design, target_table
     from triaxtrack.optics import read_cameras
@@ -257,7 +275,7 @@ def bench_tracking(width: int, height: int, frames: int, hold: int = 6, test_fra
 
     r: dict = {"peak_mb": {}}
     with tempfile.TemporaryDirectory(prefix="triaxtrack-bench-") as tmp:
-        sim = _render_video(Path(tmp), width, height, frames, test_frames, seed, "h265" in codecs)
+        sim = _render_video(Path(tmp), width, height, frames, test_frames, seed, "h265" in codecs, gop)
         video, camera, cfg = sim["video"], sim["camera"], sim["cfg"]
         videos = {c: sim["video265" if c == "h265" else "video"] for c in codecs}
         r.update(
@@ -294,9 +312,22 @@ def bench_tracking(width: int, height: int, frames: int, hold: int = 6, test_fra
         def pipeline(path: Path) -> pd.DataFrame:
             return track.track_frames(iter_test_frames(path, fmap, 0, n), labels, camera, range(n), tcfg)
 
-        _log(f"decode only and decode + tracking, {repeat} times each ({', '.join(codecs)}) ...")
+        # fast mode: one processed frame a GOP, on every keyframe (as step_s = gop_s)
+        keys = {c: keyframe_test_frames(p, fmap, 0, n) for c, p in videos.items()}
+        decoded: dict[str, int] = {}
+
+        def fast(path: Path) -> pd.DataFrame:
+            codec = next(c for c, p in videos.items() if p == path)
+            sparse = ProcessedTestFrames(path, fmap, 0, n, keys[codec])
+            out = track.track_frames(sparse, labels, camera, keys[codec], tcfg)
+            decoded[codec] = sparse.decoded
+            return out
+
+        _log(f"decode only, decode + tracking and fast mode, {repeat} times each ({', '.join(codecs)}) ...")
         times: dict[tuple, list[float]] = {}
-        stages = (("decode", decode), ("pipeline", pipeline))
+        stages = (("decode", decode), ("pipeline", pipeline), ("fast mode", fast))
+        every_tracks: dict[str, pd.DataFrame] = {}
+        fast_tracks: dict[str, pd.DataFrame] = {}
         for _ in range(repeat):  # alternate, so that a slow spell of the machine hits both
             for (codec, path), (name, fn) in itertools.product(videos.items(), stages):
                 _reset_peak()
@@ -307,8 +338,15 @@ def bench_tracking(width: int, height: int, frames: int, hold: int = 6, test_fra
                 r["peak_mb"][stage] = max(r["peak_mb"].get(stage, 0.0), _peak_mb())
                 if (codec, name) == (codecs[0], "pipeline"):
                     tracks = out
+                if name == "pipeline":
+                    every_tracks[codec] = out
+                if name == "fast mode":
+                    fast_tracks[codec] = out
         r["decode_s"] = {c: min(times[c, "decode"]) for c in codecs}
         r["pipeline_s"] = {c: min(times[c, "pipeline"]) for c in codecs}
+        r["fast_s"] = {c: min(times[c, "fast mode"]) for c in codecs}
+        r["keys"], r["decoded"], r["gop"] = keys, decoded, gop
+        r["fast_vs_every_px"] = {c: _largest_difference(fast_tracks[c], every_tracks[c]) for c in codecs}
         r["tracks"] = tracks
 
         _log(f"tracking on {hold} decoded frames held in memory ...")
@@ -351,6 +389,32 @@ def bench_tracking(width: int, height: int, frames: int, hold: int = 6, test_fra
         r["truth"], r["motion_px"] = _truth_errors(tracks, truth), _motion(truth)
     r["maxrss_mb"] = _process_peak_mb()
     return r
+
+
+def _largest_difference(fast: pd.DataFrame, every: pd.DataFrame) -> tuple[float, int, int]:
+    """Fast mode's reported centroids against every-frame mode's at the same (frame, ID): the
+    largest distance (px), and the reports of each (fast, every-frame) at fast's frames."""
+    ok = fast[fast["reason"] == ""]
+    ref = every[(every["reason"] == "") & every["frame"].isin(fast["frame"].unique())]
+    both = ok.merge(ref, on=["frame", "id"], suffixes=("", "_every"))
+    d = np.hypot(both["u_px"] - both["u_px_every"], both["v_px"] - both["v_px_every"])
+    return (float(d.max()) if len(d) else float("nan")), len(ok), len(ref)
+
+
+# a long real test, for the wall-time projection (issue 17): 16 cameras x 15 fps x 3.3 h
+LONG_TEST_CAMERAS = 16
+LONG_TEST_FPS = 15.0
+LONG_TEST_HOURS = 3.3
+LONG_TEST_STEP_S = 2.0  # one processed frame per 2 s: a recorder's usual GOP
+PROJECTION_CORES = (2, 64)
+
+
+def project_wall_hours(seconds_per_frame: float, step_s: float | None, cores: int) -> float:
+    """Hours of wall time to track the long test (``LONG_TEST_*``) at ``seconds_per_frame`` per
+    processed camera-frame (every frame for ``step_s`` None, else one per ``step_s``), with
+    one job per core all the time (the camera x chunk jobs are independent)."""
+    frames = LONG_TEST_HOURS * 3600 * (LONG_TEST_FPS if step_s is None else 1 / step_s)
+    return LONG_TEST_CAMERAS * frames * seconds_per_frame / cores / 3600
 
 
 def _truth_errors(tracks: pd.DataFrame, truth: pd.DataFrame) -> dict:
@@ -489,6 +553,38 @@ def print_tracking(r: dict, benchmarks: Path) -> None:
             "the rest: set-up (once a chunk), table",
         ),
         ("  of which measure_targets", f"{r['measure_s'] * 1e3:.1f}", "ms/frame", "inside _step"),
+    ]
+    rows.append((f"Cost per processed frame, one a GOP ({r['gop']} frames here) on its keyframe", "", "", ""))
+    for codec, fast_s in r["fast_s"].items():
+        name = "" if len(r["codecs"]) == 1 else f"{_CODEC_NAMES[codec]}: "
+        k = len(r["keys"][codec])
+        every = r["pipeline_s"][codec] / k
+        far, n_fast, n_every = r["fast_vs_every_px"][codec]
+        rows += [
+            (f"{name}fast mode (ProcessedTestFrames)", f"{fast_s / k * 1e3:.0f}", "ms/processed",
+             f"{r['decoded'][codec]} frames decoded for {k} processed (with the chunk's set-up)"),
+            (f"{name}every-frame mode (the pipeline)", f"{every * 1e3:.0f}", "ms/processed",
+             f"{n} frames decoded; {_times(every * k / fast_s)} fast mode here, "
+             f"{_times(r['pipeline_s'][codec] / n * LONG_TEST_FPS * LONG_TEST_STEP_S / (fast_s / k))} "
+             f"at a {LONG_TEST_STEP_S:g} s GOP at {LONG_TEST_FPS:g} fps"),
+            (f"{name}  fast vs every-frame centroids", f"{far:.4f}", "px",
+             f"largest distance; {n_fast} vs {n_every} reported"),
+        ]  # fmt: skip
+    codec = next(iter(r["fast_s"]))
+    per_frame = r["pipeline_s"][codec] / n
+    per_processed = r["fast_s"][codec] / len(r["keys"][codec])
+    long_test = f"{LONG_TEST_HOURS:g} h x {LONG_TEST_CAMERAS} cameras x {LONG_TEST_FPS:g} fps"
+    rows.append((f"Wall time for {long_test} at {v['width']}x{v['height']} ({_CODEC_NAMES[codec]}; "
+                 "tracking jobs only)", "", "", ""))  # fmt: skip
+    for cores in PROJECTION_CORES:
+        rows += [
+            (f"every frame, {cores} cores", f"{project_wall_hours(per_frame, None, cores):.1f}", "h",
+             f"{per_frame * 1e3:.0f} ms per camera-frame"),
+            (f"one frame per {LONG_TEST_STEP_S:g} s, fast mode, {cores} cores",
+             f"{project_wall_hours(per_processed, LONG_TEST_STEP_S, cores):.2f}", "h",
+             f"{per_processed * 1e3:.0f} ms per processed frame (every-frame mode: as every frame)"),
+        ]  # fmt: skip
+    rows += [
         ("Brute force: detect and label every frame", "", "", ""),
         (
             "label_frame per frame",
@@ -597,6 +693,8 @@ def main(argv: list[str] | None = None) -> None:
                    help="tracking: the clip is the first --frames frames of a test this long (default 100, "
                         "the workflow demo's: the dots move as fast per frame)")  # fmt: skip
     p.add_argument("--repeat", type=int, default=3, help="tracking: runs of decode and pipeline (best taken)")
+    p.add_argument("--gop", type=int, default=6,
+                   help="tracking: the clip's keyframe interval in frames (default 6)")  # fmt: skip
     p.add_argument("--codecs", default="h264,h265", help="tracking: h264 (rendered) and/or h265 (re-encoded)")
     p.add_argument("--benchmarks", type=Path, default=Path("benchmarks"),
                    help="tracking: Snakemake's benchmark folder (default ./benchmarks)")  # fmt: skip
@@ -606,15 +704,24 @@ def main(argv: list[str] | None = None) -> None:
     args.what = args.what or ["tracking"]  # (no `choices`: Python 3.11 checks an empty list against them)
     if set(args.what) - {"tracking", "simulate", "identify"}:
         p.error(f"what: choose among tracking, simulate, identify, not {args.what}")
-    if args.frames < 2 or args.hold < 1 or args.repeat < 1:
-        p.error("--frames must be >= 2, --hold and --repeat >= 1")
+    if args.frames < 2 or args.hold < 1 or args.repeat < 1 or args.gop < 1:
+        p.error("--frames must be >= 2, --hold, --repeat and --gop >= 1")
     codecs = tuple(c.strip().lower() for c in args.codecs.split(","))
     if not codecs or set(codecs) - set(_CODEC_NAMES):
         p.error(f"--codecs: h264 and/or h265, not {args.codecs!r}")
     if "tracking" in args.what:
         w, h = args.size
         print_tracking(
-            bench_tracking(w, h, args.frames, args.hold, args.test_frames, repeat=args.repeat, codecs=codecs),
+            bench_tracking(
+                w,
+                h,
+                args.frames,
+                args.hold,
+                args.test_frames,
+                repeat=args.repeat,
+                codecs=codecs,
+                gop=args.gop,
+            ),
             args.benchmarks,
         )
     sizes = [_size(size) for size in args.sizes.split(",")]

@@ -40,7 +40,7 @@ import pandas as pd
 import yaml
 
 from triaxtrack.tables import FRAME_MAP, conform
-from triaxtrack.video import iter_frames, keyframe_indices, probe_video
+from triaxtrack.video import SparseFrames, iter_frames, keyframe_indices, probe_video
 
 SUBFRAME_TOL_FRAMES = 0.05  # |start_offset_s * fps - m| above this: the camera is off the test frames
 REASONS = ("before_start", "dropped", "after_end")
@@ -211,6 +211,49 @@ def _iter_test_frames(
                 f"{video_path}: the video ends before frame {row.video_index} (test frame {k}); "
                 "the frame map does not match this video"
             )
+
+
+class ProcessedTestFrames:
+    """``(k, image)`` for test frames ``start <= k < stop``, in order, decoding only the
+    ``processed`` ones (and ``start``, the labelled frame): image is the camera's grey frame
+    (uint8, (H, W), read-only) for those the camera recorded, None for every other frame (not
+    decoded, or missing: the tracker follows its targets across them by their velocity).
+
+    The fast mode of tracking (``tracking.step_s`` with ``fast``): the frames are decoded by
+    :class:`triaxtrack.video.SparseFrames` (a keyframe alone, any other frame from the keyframe
+    at or before it), so with processed frames on keyframes the cost is one decoded frame per
+    processed frame. ``decoded`` and ``seeks``: the decoder's counts so far. ValueError naming
+    the file, as :func:`iter_test_frames`, if the video lacks a frame the map expects.
+    """
+
+    def __init__(
+        self, video_path: str | Path, fmap: pd.DataFrame, start: int, stop: int, processed: Sequence[int]
+    ) -> None:
+        self.rows = _rows(fmap, range(start, stop))
+        keep = self.rows.index.isin(np.r_[np.asarray(processed, np.int64), start])
+        rec = self.rows[keep & ~self.rows["missing"].astype(bool)]
+        # test frame -> video index (both increasing: the frame map is in order)
+        self._video = dict(zip(rec.index.astype(int), rec["video_index"].astype(int), strict=True))
+        self._reader = SparseFrames(video_path, self._video.values())
+
+    @property
+    def decoded(self) -> int:
+        return self._reader.decoded
+
+    @property
+    def seeks(self) -> int:
+        return self._reader.seeks
+
+    def __iter__(self) -> Iterator[tuple[int, np.ndarray | None]]:
+        pictures = iter(self._reader)
+        for k in self.rows.index.astype(int):
+            if k not in self._video:
+                yield k, None
+                continue
+            j, image = next(pictures)
+            if j != self._video[k]:  # SparseFrames yields exactly its indices, in order
+                raise ValueError(f"{self._reader.path}: decoded frame {j} for test frame {k}")
+            yield k, image
 
 
 def read_test_frame(video_path: str | Path, fmap: pd.DataFrame, frame: int) -> np.ndarray | None:

@@ -30,6 +30,7 @@ wildcard_constraints:
     test=r"[A-Za-z0-9_.-]+",
     camera=r"[A-Za-z0-9_.-]+",
     chunk=r"\d{4}",
+    segment=r"\d{4}",
 
 
 # ---------------------------------------------------------------- validation
@@ -296,23 +297,50 @@ def get_chunk_frames(wildcards):
 # ---------------------------------------------------------------- input functions: simulation
 
 
+def _render_segments(test):
+    """(start, stop) test frames of each video segment of a simulated test: chunk_size
+    rounded up to whole GOPs, starting on the recorder's keyframe grid (render_segments).
+    """
+    from triaxtrack.simulate import SimulationConfig, gop_frames, render_segments
+
+    gop = gop_frames(SimulationConfig.from_dict(_sim_config(test)))
+    return render_segments(get_frames(test), config["chunk_size"], gop)
+
+
+def get_segments(test):
+    """Video segment ids "0000", "0001", ... of a simulated test (rule render_video_chunk)."""
+    return [f"{i:0{CHUNK_ID_DIGITS}d}" for i in range(len(_render_segments(test)))]
+
+
+def get_segment_frames(wildcards):
+    """Frame range of one video segment: dict(start=..., stop=...), stop exclusive."""
+    segments = _render_segments(wildcards.test)
+    i = int(wildcards.segment)
+    if i >= len(segments):
+        raise WorkflowError(
+            f"test {wildcards.test!r} has no video segment {wildcards.segment}"
+        )
+    start, stop = segments[i]
+    return {"start": start, "stop": stop}
+
+
 def get_camera_chunk_videos(wildcards):
-    """All chunk videos of one simulated camera, in frame order."""
+    """All video segments of one simulated camera, in frame order."""
     return expand(
-        "results/{test}/sim_chunks/{camera}/{chunk}.mp4",
+        "results/{test}/sim_chunks/{camera}/{segment}.mp4",
         test=wildcards.test,
         camera=wildcards.camera,
-        chunk=get_chunks(wildcards.test),
+        segment=get_segments(wildcards.test),
     )
 
 
 def get_chunk_observations(wildcards):
-    """Truth observations of every chunk of every camera of a simulated test."""
+    """Truth observations of every video segment of every camera of a simulated test."""
     return expand(
-        "results/{test}/sim_chunks/{camera}/{chunk}.parquet",
+        "results/{test}/sim_chunks/{camera}/{segment}.parquet",
         test=wildcards.test,
         camera=get_cameras(wildcards.test),
-        chunk=get_chunks(wildcards.test),
+        segment=get_segments(wildcards.test),
     )
 
 

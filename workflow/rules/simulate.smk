@@ -33,19 +33,21 @@ rule simulate_scene:
 
 
 rule render_video_chunk:
-    """Render one chunk of frames of one camera: a video segment and its exact observations."""
+    """Render one video segment of one camera and its exact observations: chunk_size frames
+    rounded up to whole GOPs, starting on the recorder's keyframe grid (gop_s), so that the
+    joined video has keyframes there only."""
     input:
         kit="results/{test}/simulated/kit",
         test_yaml="results/{test}/simulated/test.yaml",
         cameras="results/{test}/simulated/truth/cameras.json",
         scene="results/{test}/simulated/truth/scene.json",
     output:
-        video=temp("results/{test}/sim_chunks/{camera}/{chunk}.mp4"),
-        observations="results/{test}/sim_chunks/{camera}/{chunk}.parquet",
+        video=temp("results/{test}/sim_chunks/{camera}/{segment}.mp4"),
+        observations="results/{test}/sim_chunks/{camera}/{segment}.parquet",
     log:
-        "logs/{test}/render_video_chunk/{camera}/{chunk}.log",
+        "logs/{test}/render_video_chunk/{camera}/{segment}.log",
     benchmark:
-        "benchmarks/{test}/render_video_chunk/{camera}/{chunk}.tsv"
+        "benchmarks/{test}/render_video_chunk/{camera}/{segment}.tsv"
     wildcard_constraints:
         test=SIMULATED_TEST,
     conda:
@@ -55,7 +57,7 @@ rule render_video_chunk:
         mem_mb=2000,
         runtime=30,
     params:
-        frames=get_chunk_frames,
+        frames=get_segment_frames,
     script:
         "../scripts/render_video_chunk.py"
 

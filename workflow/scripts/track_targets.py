@@ -1,10 +1,12 @@
 """Rule track_targets: follow one camera's labelled targets through one chunk."""
 
+import time
+
 import yaml
 
 from triaxtrack.codec_lag import lag_corrected
 from triaxtrack.completion import membrane_grid
-from triaxtrack.frames import iter_test_frames, keyframe_test_frames
+from triaxtrack.frames import ProcessedTestFrames, iter_test_frames, keyframe_test_frames
 from triaxtrack.kit import load_kit_design
 from triaxtrack.logs import log_to
 from triaxtrack.tables import FRAME_MAP, LABELS, TRACKS, read_table, write_table
@@ -19,11 +21,22 @@ labels = read_table(snakemake.input.labels, LABELS)
 fps = float(yaml.safe_load(open(snakemake.input.test_yaml))["fps"])
 camera = snakemake.wildcards.camera
 plan = chunk_frames(labels, fmap, fps, snakemake.params.chunk, cfg, snakemake.input.labels)
-frames = iter_test_frames(snakemake.input.video, fmap, plan.first, plan.end)
+fast = cfg.step_s is not None and snakemake.params.tracking["fast"]
+if fast:  # decode only the processed frames; follow the targets across the others
+    frames = ProcessedTestFrames(snakemake.input.video, fmap, plan.first, plan.end, plan.report)
+else:
+    frames = iter_test_frames(snakemake.input.video, fmap, plan.first, plan.end)
+t0 = time.perf_counter()
 complete = snakemake.params.tracking["complete_grid"]
 grid = membrane_grid(load_kit_design(snakemake.input.kit)) if complete else None
 tracks = track_frames(frames, labels, camera, plan.report, cfg, grid)
-if snakemake.params.tracking["codec_lag"]:
+seconds = time.perf_counter() - t0
+mode = f"fast mode: {frames.decoded} frames decoded ({frames.seeks} seeks)" if fast else "every frame decoded"
+print(f"{camera}: {mode} for {len(plan.report)} reported of frames {plan.first}..{plan.end - 1}: "
+      f"decoding and tracking {seconds:.2f} s")  # fmt: skip
+if snakemake.params.tracking["codec_lag"] and fast:
+    print(f"{camera}: codec lag not corrected: fast mode decodes no P frames around the keyframes")
+elif snakemake.params.tracking["codec_lag"]:
     keys = keyframe_test_frames(snakemake.input.video, fmap, plan.first, plan.end)
     tracks, lags = lag_corrected(tracks, keys)
     print(f"{camera}: P frames against keyframes {keys.tolist()} (triaxtrack.codec_lag):")

@@ -27,8 +27,9 @@ Frame ``k`` has time ``k / fps`` s and loading progress ``p = k / (frames - 1)``
 
 Modules:
 
-* :mod:`~triaxtrack.simulate.config`: :class:`SimulationConfig`, ``PRESETS`` and the frames each
-  camera records (:func:`recorded_frames`);
+* :mod:`~triaxtrack.simulate.config`: :class:`SimulationConfig`, ``PRESETS``, the frames each
+  camera records (:func:`recorded_frames`) and the video segments rendered on the recorder's
+  GOP grid (:func:`gop_frames`, :func:`render_segments`);
 * :mod:`~triaxtrack.simulate.cameras`: the seeded ring of cameras (:func:`make_cameras`);
 * :mod:`~triaxtrack.simulate.scene`: :class:`Scene` (:func:`load_scene`) and the surfaces' points
   at a loading progress;
@@ -89,8 +90,10 @@ from triaxtrack.simulate.config import (
     apply_preset,
     camera_names,
     check_loading_history,
+    gop_frames,
     loading_progress,
     recorded_frames,
+    render_segments,
 )
 from triaxtrack.simulate.folder import make_scene, render_chunk, simulate_test
 from triaxtrack.simulate.render import (
@@ -134,8 +137,8 @@ __all__ = [
     "PEDESTAL_QUADS", "PRESETS", "SUBROWS_INK", "SUBROWS_PLAIN", "Scene", "SimulationConfig", "TILT_STREAM",
     "VIGNETTING", "apply_preset", "board_poses", "camera_names", "camera_pitch_deg", "centroid_errors",
     "check_loading_history", "check_simulation", "corner_board_count", "deformation_for", "finish_truth",
-    "frame_progress", "load_scene", "loading_progress", "look_at",
+    "frame_progress", "gop_frames", "load_scene", "loading_progress", "look_at",
     "make_cameras", "make_scene", "material_height", "progress", "recorded_frames", "render_board_image",
-    "render_calibration", "render_chunk", "simulate_test", "target_positions", "tilt_rotation",
-    "truth_volume",
+    "render_calibration", "render_chunk", "render_segments", "simulate_test", "target_positions",
+    "tilt_rotation", "truth_volume",
 ]  # fmt: skip

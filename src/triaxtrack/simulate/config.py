@@ -87,6 +87,8 @@ class SimulationConfig:
         _check_effects(cfg)
         if cfg.codec not in ("h264", "h265"):
             raise ValueError(f"codec must be h264 or h265, not {cfg.codec!r}")
+        if isinstance(cfg.gop_s, bool) or not isinstance(cfg.gop_s, (int, float)) or not cfg.gop_s > 0:
+            raise ValueError(f"gop_s must be a number of seconds > 0, not {cfg.gop_s!r}")
         if cfg.frames < 2 or cfg.cameras < 1:
             raise ValueError("a simulated test needs at least 2 frames and 1 camera")
         names = set(camera_names(cfg.cameras))
@@ -213,3 +215,24 @@ def recorded_frames(cfg: SimulationConfig, camera: str) -> np.ndarray:
     if len(n) == 0:
         raise ValueError(f"{camera} records no frame (start_offset_s and dropped_frames)")
     return n + m
+
+
+def gop_frames(cfg: SimulationConfig) -> int:
+    """The recorder's keyframe interval in frames: ``round(gop_s x fps)``, at least 1."""
+    return max(1, round(cfg.gop_s * cfg.fps))
+
+
+def render_segments(frames: int, chunk_size: int, gop: int) -> list[tuple[int, int]]:
+    """The test frames ``(start, stop)`` (stop exclusive) of each separately encoded video
+    segment of a simulated camera, in order, covering ``0 .. frames - 1``.
+
+    A recorder puts a keyframe on every multiple of ``gop`` frames and nowhere else, while a
+    segment joined by stream copy (:func:`triaxtrack.video.concat_videos`) must start with one:
+    so segments start on the GOP grid, ``chunk_size`` rounded up to a whole number of GOPs long
+    (the last one shorter). Every ``chunk_size`` that is a multiple of ``gop`` gives the
+    workflow's chunks themselves.
+    """
+    if frames < 1 or chunk_size < 1 or gop < 1:
+        raise ValueError(f"frames, chunk_size and gop must be >= 1, not {frames}, {chunk_size}, {gop}")
+    size = -(-chunk_size // gop) * gop
+    return [(start, min(start + size, frames)) for start in range(0, frames, size)]

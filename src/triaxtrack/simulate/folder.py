@@ -14,7 +14,13 @@ import yaml
 from triaxtrack.kit import load_kit_design
 from triaxtrack.simulate.boards import render_calibration
 from triaxtrack.simulate.cameras import make_cameras
-from triaxtrack.simulate.config import SimulationConfig, camera_names, recorded_frames
+from triaxtrack.simulate.config import (
+    SimulationConfig,
+    camera_names,
+    gop_frames,
+    recorded_frames,
+    render_segments,
+)
 from triaxtrack.simulate.loadlog import load_frame_entry, write_load_frame
 from triaxtrack.simulate.render import CameraRenderer
 from triaxtrack.simulate.scene import deformation_for, load_scene
@@ -94,6 +100,12 @@ def render_chunk(
     """Render test frames ``[start, stop)`` of one camera: an H.264/H.265 segment of the frames
     the camera recorded (:func:`recorded_frames`) and their truth observations (by test frame).
 
+    The segment is encoded as a recorder does (``VideoWriter(recorder=True)``): a keyframe at
+    every test frame on the GOP grid (multiples of :func:`gop_frames`) and nowhere else, but for
+    the segment's first frame, always one: so ``start`` should be on the grid
+    (:func:`render_segments`) unless the camera did not record that frame (it started later, or
+    dropped it: its first frame after the gap is then a keyframe, as a recorder's first is).
+
     Every frame of the range is rendered, recorded or not, so the recorded ones are the very
     images of a camera without offset or drops. ValueError if the camera recorded none of them
     (the segment would be empty: use a larger chunk_size or a smaller offset).
@@ -109,13 +121,15 @@ def render_chunk(
         )
     obs = []
     Path(video_out).parent.mkdir(parents=True, exist_ok=True)
+    gop = gop_frames(scene.cfg)
     with VideoWriter(
-        video_out, cam.width, cam.height, scene.cfg.fps, codec=scene.cfg.codec, crf=scene.cfg.crf
-    ) as vw:
+        video_out, cam.width, cam.height, scene.cfg.fps, codec=scene.cfg.codec, crf=scene.cfg.crf,
+        gop=gop, recorder=True,
+    ) as vw:  # fmt: skip
         for k in range(start, stop):
             img, o = rend.render(k)
             if k in recorded:
-                vw.write(img)
+                vw.write(img, keyframe=k % gop == 0)
                 obs.append(o)
     write_table(pd.concat(obs, ignore_index=True), observations_out, OBSERVATIONS)
 
@@ -123,7 +137,8 @@ def render_chunk(
 def simulate_test(
     cfg: SimulationConfig, kit_dir: str | Path, test_dir: str | Path, name: str, chunk_size: int = 50
 ) -> None:
-    """The whole simulation in one process (what the workflow fans out per camera and chunk)."""
+    """The whole simulation in one process (what the workflow fans out per camera and video
+    segment: :func:`render_segments`)."""
     from triaxtrack.video import concat_videos
 
     test_dir = Path(test_dir)
@@ -132,8 +147,7 @@ def simulate_test(
     parts = []
     for cam in camera_names(cfg.cameras):
         segs = []
-        for start in range(0, cfg.frames, chunk_size):
-            stop = min(start + chunk_size, cfg.frames)
+        for start, stop in render_segments(cfg.frames, chunk_size, gop_frames(cfg)):
             seg = work / cam / f"{start:06d}.mp4"
             obs = work / cam / f"{start:06d}.parquet"
             render_chunk(test_dir, cam, start, stop, seg, obs)
