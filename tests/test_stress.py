@@ -113,16 +113,18 @@ def test_log_columns_and_units(tmp_path, simulated):
         )
 
 
-def test_clock_offset_and_warning(tmp_path, simulated):
-    cfg, log, truth, meta = simulated
+def log_and_offset(tmp_path, log, truth):
+    """The log as read back, the measured volume series and the clock offset fitted between them."""
     lg = read_load_frame_log(tmp_path, write_log(tmp_path, log))
     vol = measured_volume(truth)
-    est = estimate_clock_offset(
-        lg["log_time_s"],
-        lg["axial_displacement_mm"],
-        vol["time_s"],
-        vol["height_mm"].iloc[0] - vol["height_mm"],
-    )
+    settled = vol["height_mm"].iloc[0] - vol["height_mm"]
+    est = estimate_clock_offset(lg["log_time_s"], lg["axial_displacement_mm"], vol["time_s"], settled)
+    return lg, vol, est
+
+
+def test_clock_offset_and_warning(tmp_path, simulated):
+    cfg, log, truth, meta = simulated
+    lg, vol, est = log_and_offset(tmp_path, log, truth)
     assert abs(est.offset_s - OFFSET_S) * cfg.fps < OFFSET_TOL_FRAMES
     assert abs(est.offset_s - OFFSET_S) < 4 * est.sigma_s + 1e-3
     assert est.residual_mm < 2 * HEIGHT_NOISE_MM
@@ -135,14 +137,7 @@ def test_q_on_the_mean_area_against_truth(tmp_path, simulated):
     area is within the issue's bands; zeroing removes the load cell's offset; the standard q of
     a bulging specimen is further off than the measured area's."""
     cfg, log, truth, meta = simulated
-    lg = read_load_frame_log(tmp_path, write_log(tmp_path, log))
-    vol = measured_volume(truth)
-    est = estimate_clock_offset(
-        lg["log_time_s"],
-        lg["axial_displacement_mm"],
-        vol["time_s"],
-        vol["height_mm"].iloc[0] - vol["height_mm"],
-    )
+    lg, vol, est = log_and_offset(tmp_path, log, truth)
     sec = truth[["frame", "area_mid_mm2", "area_min_mm2"]]
     out = stress_strain(vol, sec, lg, est.offset_s, DESIGN, StressConfig(), est.sigma_s)
     q, qt = out["q_mean_kpa"].to_numpy(), truth["q_mean_kpa"].to_numpy()

@@ -105,6 +105,32 @@ def membrane_frames(
         yield MembraneFrame(int(frame), float(pf["time_s"].iloc[0]), xyz, data)
 
 
+
+def measured_membrane_frames(
+    kit_dir: str | Path, volume_path: str | Path, points_path: str | Path, volume_cfg: dict,
+    max_frames: int | None = None,
+) -> Iterator[MembraneFrame | tuple[int, str]]:
+    """:func:`membrane_frames` of the frames ``volume.parquet`` measured (at most ``max_frames``
+    of them, spread over the test as the report's, :func:`triaxtrack.report.chosen_frames`),
+    read from the test's kit, ``volume.parquet`` and ``points.parquet``; ``volume_cfg``: the
+    config's ``volume`` section (membrane thickness, largest missing share)."""
+    from triaxtrack.kit import load_kit_design, target_table
+    from triaxtrack.tables import POINTS, VOLUME_RESULT, read_table
+
+    design = load_kit_design(kit_dir)
+    volume = read_table(volume_path, VOLUME_RESULT)
+    frames = volume.loc[volume["reason"] == "", "frame"].tolist()
+    if max_frames is not None:
+        from triaxtrack.report import chosen_frames
+
+        frames = chosen_frames(frames, max_frames)
+    reference = volume["reference_frame"].dropna()
+    return membrane_frames(
+        read_table(points_path, POINTS), target_table(design), design, frames,
+        int(reference.iloc[0]) if len(reference) else -1, t0=volume_cfg["membrane_thickness_mm"],
+        max_missing_share=volume_cfg["max_missing_share"],
+    )  # fmt: skip
+
 def grid_quads(n_r: int, n_c: int) -> np.ndarray:
     """(M, 4) int64 quads of a (R, C) grid stored row-major, periodic in C (outward for rows
     bottom-up and columns by increasing theta)."""
