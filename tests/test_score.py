@@ -196,3 +196,21 @@ def test_view_angle_of_targets_round_the_cylinder():
     assert cos[0] == pytest.approx(1.0)
     assert cos[1] == pytest.approx(np.cos(a + np.arctan2(35 * np.sin(a), 340 - 35 * np.cos(a))), abs=1e-9)
     assert 0.4 < cos[1] < 0.5 and abs(cos[2]) < 0.11 and np.isnan(cos[3])
+
+
+def test_a_camera_left_out_by_the_workflow_is_reported_not_failed():
+    """A true camera missing from the results fails, unless quality.json says it was left out."""
+    import numpy as np
+
+    from triaxtrack.optics import Camera
+    from triaxtrack.score import score_cameras
+
+    K = np.array([[800.0, 0, 320], [0, 800, 240], [0, 0, 1]])
+    t = np.array([0.0, 0.0, 300.0])
+    cams = {n: Camera(n, 640, 480, K, np.zeros(5), np.eye(3), t) for n in ("a", "b", "c")}
+    result = {n: cams[n] for n in ("a", "b")}
+    rows = score_cameras(result, cams, ScoreTolerances()).set_index("metric")
+    assert not rows.loc["camera_missing", "passed"] and rows.loc["camera_missing", "item"] == "c"
+    left_out = {"c": "video file not found"}
+    rows = score_cameras(result, cams, ScoreTolerances(), left_out=left_out).set_index("metric")
+    assert "camera_missing" not in rows.index and rows.loc["camera_left_out", "passed"]

@@ -19,6 +19,7 @@ a row without a tolerance is reported only. Tolerances: the config's `score` sec
 calibration/<camera>.json, cameras.json
   focal_rel_error, principal_point_error (px), undistortion_map_error (px; reported:
   ray_direction_error), camera_center_error (mm), camera_rotation_error (deg);
+  camera_left_out: a true camera the workflow left out, and said why in quality.json (reported)
   camera_missing / camera_unknown: a true camera absent from the results / a result camera
   the truth lacks (fail); image_size_mismatch: calibrated at another image size (fails)
 labels.parquet (per camera@frame)

@@ -10,6 +10,7 @@ reported), ``unit``, ``passed``, ``source`` (the results file scored).
 from __future__ import annotations
 
 import json
+from collections.abc import Collection
 from dataclasses import dataclass, fields
 from pathlib import Path
 
@@ -129,8 +130,9 @@ def ray_direction_error(est: Camera, truth: Camera, step_px: int = UNDISTORTION_
 
 
 def score_cameras(
-    result: dict[str, Camera], truth: dict[str, Camera], tol: ScoreTolerances, source: str = "cameras.json"
-) -> pd.DataFrame:
+    result: dict[str, Camera], truth: dict[str, Camera], tol: ScoreTolerances, source: str = "cameras.json",
+    left_out: Collection[str] = (),
+) -> pd.DataFrame:  # fmt: skip
     """Per-camera intrinsic and pose errors of estimated cameras against the true ones.
 
     A camera whose pose is the identity (intrinsics only, e.g. after calibration) is scored on
@@ -151,9 +153,12 @@ def score_cameras(
             rows.append(_metric("camera_center_error", name, dc, tol.camera_center_mm, "mm", source))
             rot = rotation_angle_deg(cam.R, tr.R)
             rows.append(_metric("camera_rotation_error", name, rot, tol.camera_rotation_deg, "deg", source))
-    rows += [
-        _metric("camera_missing", name, np.nan, source=source) for name in sorted(set(truth) - set(result))
-    ]
+    for name in sorted(set(truth) - set(result)):  # a camera the workflow left out and said so: reported
+        if name in left_out:
+            why = "why: quality.json"
+            rows.append(_metric("camera_left_out", name, 1.0, unit=why, source="quality.json"))
+        else:
+            rows.append(_metric("camera_missing", name, np.nan, source=source))
     return pd.DataFrame(rows, columns=COLUMNS)
 
 
@@ -484,12 +489,15 @@ def score(results_dir: str | Path, truth_dir: str | Path, tol: ScoreTolerances |
     calibrations = read_calibrations(results_dir / "calibration")
     if calibrations:
         parts.append(score_calibrations(calibrations, truth_cameras, tol))
+    quality_path = results_dir / "quality.json"
+    quality = json.loads(quality_path.read_text()) if quality_path.exists() else {}
     if (results_dir / "cameras.json").exists():
-        parts.append(score_cameras(read_cameras(results_dir / "cameras.json"), truth_cameras, tol))
+        cameras = read_cameras(results_dir / "cameras.json")
+        parts.append(score_cameras(cameras, truth_cameras, tol, left_out=quality.get("cameras_left_out", {})))
     if (results_dir / "labels.parquet").exists():
         parts.append(_score_labels(results_dir / "labels.parquet", truth_dir, truth_cameras, tol))
-    if (results_dir / "quality.json").exists():
-        parts.append(score_quality(json.loads((results_dir / "quality.json").read_text()), tol))
+    if quality:
+        parts.append(score_quality(quality, tol))
     if (results_dir / "points.parquet").exists():
         parts.append(_score_points(results_dir / "points.parquet", truth_dir, tol))
     if (results_dir / "tracking.parquet").exists() and (results_dir / "observations.parquet").exists():
