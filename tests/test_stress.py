@@ -8,9 +8,9 @@ import re
 import numpy as np
 import pandas as pd
 import pytest
+from test_volume import frame_points  # the deforming specimen's points, as the volume tests build them
 
 from triaxtrack.deformation import Deformation
-from triaxtrack.kit import design_points
 from triaxtrack.simulate import SimulationConfig, loading_progress
 from triaxtrack.simulate.loadlog import LOG_COLUMNS, LoadFrameSimulation, deviator_stress, simulate_load_frame
 from triaxtrack.stress import (
@@ -152,16 +152,6 @@ def test_q_on_the_mean_area_against_truth(tmp_path, simulated):
     assert np.allclose(out["p_eff_kpa"] - out["p_kpa"], -out["pore_pressure_kpa"])
     assert np.isfinite(out["e_secant_kpa"].iloc[-1]) and np.isfinite(out["e_tangent_kpa"].iloc[-1])
     assert std_err.max() < 0.02  # the standard formula on this barrel stays within 2 %
-
-
-def frame_points(design, table, d: Deformation, p: float) -> pd.DataFrame:
-    mem = table[table["surface"] == "membrane"]
-    xyz, _ = d.outer_surface(mem["theta_rad"].to_numpy(), mem["z_mm"].to_numpy(), p)
-    top = table[table["surface"] == "pedestal_top"]
-    cts = design_points(design, table).set_index("id").loc[top["id"], ["x_mm", "y_mm", "z_mm"]].to_numpy()
-    pts = np.vstack([xyz, cts + d.top_displacement(p)])
-    ids = np.r_[mem["id"].to_numpy(), top["id"].to_numpy()]
-    return pd.DataFrame({"id": ids, "x_mm": pts[:, 0], "y_mm": pts[:, 1], "z_mm": pts[:, 2]})
 
 
 @pytest.fixture(scope="module")

@@ -6,7 +6,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from triaxtrack.completion import MembraneGrid
+from triaxtrack.completion import DotGrid
 from triaxtrack.detect import detect_blobs
 from triaxtrack.optics import Camera, project_air
 from triaxtrack.timesteps import camera_motion, handover_check, large_losses, tracking_summary
@@ -114,7 +114,7 @@ def test_dots_hidden_at_the_labelled_frame_are_taken_on_once_seen():
     taken on from their reported neighbours once the bar has passed, each its own dot; without
     it they are never followed."""
     ids, uv = truth_positions(0)
-    grid = MembraneGrid(ids.reshape(14, 28), aspect=1.0)  # a square grid seen face on
+    grid = DotGrid(ids.reshape(14, 28), aspect=1.0)  # a square grid seen face on
     frames = [(k, render(k)) for k in range(FRAMES)]
     tracks = track_frames(frames, first_labels(), "cam01", range(FRAMES), grid=grid)
     labelled = set(first_labels()["id"])
@@ -158,7 +158,7 @@ def test_a_band_of_rows_hidden_at_the_labelled_frame_is_filled_row_by_row(monkey
     labels = first_labels()
     # unlabelled, as the strap left them
     labels = labels.assign(id=np.where(labels["id"].isin(ids[strap]), -1, labels["id"]))
-    grid = MembraneGrid(ids.reshape(14, 28), aspect=1.0)
+    grid = DotGrid(ids.reshape(14, 28), aspect=1.0)
     tracks = track_frames(frames, labels, "cam01", range(12), grid=grid)
     rep = tracks[tracks["reason"] == ""]
     last = set(rep.loc[rep["frame"] == 11, "id"])

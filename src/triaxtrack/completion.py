@@ -42,8 +42,9 @@ MIN_VIEW_COS = 0.5  # a dot seen more obliquely than 60 degrees (its image squee
 # columns to half) is not taken on: its centroid is biased there and its neighbours crowd it
 
 
-class MembraneGrid(NamedTuple):
-    """The kit's membrane grid: ``ids`` (rows, columns) int64, the ID of the dot in kit row r and
+class DotGrid(NamedTuple):
+    """The kit's membrane dot grid of IDs (:class:`triaxtrack.volume.grid.MembraneGrid` is one
+    frame's dots in 3-D): ``ids`` (rows, columns) int64, the ID of the dot in kit row r and
     column c at ``[r - 1, c - 1]`` (Eq. 4); ``aspect`` its column pitch over its row pitch on the
     undeformed membrane (a dot's image is foreshortened across the columns by the cosine of
     its view angle, so the image's column step over its row step is ``aspect`` times that)."""
@@ -52,13 +53,13 @@ class MembraneGrid(NamedTuple):
     aspect: float
 
 
-def membrane_grid(design: dict) -> MembraneGrid:
-    """The :class:`MembraneGrid` of a kit design (``membrane`` and ``specimen`` sections)."""
+def dot_grid(design: dict) -> DotGrid:
+    """The :class:`DotGrid` of a kit design (``membrane`` and ``specimen`` sections)."""
     m = design["membrane"]
     rows, columns = int(m["rows"]), int(m["columns"])
     ids = int(m["first_id"]) + np.arange(rows * columns, dtype=np.int64).reshape(rows, columns)
     aspect = (2 * np.pi * membrane_radius(design) / columns) / (design["specimen"]["height"] / rows)
-    return MembraneGrid(ids, float(aspect))
+    return DotGrid(ids, float(aspect))
 
 
 class Candidates(NamedTuple):
@@ -72,7 +73,7 @@ class Candidates(NamedTuple):
 
 
 def grid_candidates(grid: np.ndarray, followed: np.ndarray) -> Candidates:
-    """The dots of ``grid`` (:func:`membrane_grid` ``ids``) whose IDs are not in ``followed`` but
+    """The dots of ``grid`` (:func:`dot_grid` ``ids``) whose IDs are not in ``followed`` but
     with at least ``MIN_GRID_NEIGHBOURS`` followed ones within ``GRID_REACH`` rows and columns
     (the others cannot be placed; columns wrap around), but for its end rows (beside the
     pedestals' dark faces, which a blurred dot merges with)."""
@@ -184,7 +185,7 @@ def complete_grid(
     (n, 2: reported centroids this frame, NaN where not), ``radius`` (n,) and ``mass`` (n,:
     normalised, NaN where not reported) of each dot of the grid, -1 where none; ``measure``:
     ``(gray, uv (k, 2), radius (k,)) -> WindowMeasure`` (k may be 0); ``aspect``: the grid's
-    (:class:`MembraneGrid`); ``cell_uv`` (c, 2): the cell-wall targets reported this frame."""
+    (:class:`DotGrid`); ``cell_uv`` (c, 2): the cell-wall targets reported this frame."""
     pred, rms, near, rad, squeeze = _interpolate(
         cand.row, cand.col, grid_index, uv, radius, GRID_REACH, MIN_GRID_NEIGHBOURS
     )

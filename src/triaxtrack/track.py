@@ -73,7 +73,7 @@ import numpy as np
 import pandas as pd
 from scipy.spatial import cKDTree
 
-from triaxtrack.completion import Candidates, Found, MembraneGrid, complete_grid, grid_candidates
+from triaxtrack.completion import Candidates, DotGrid, Found, complete_grid, grid_candidates
 from triaxtrack.detect import DetectParams
 from triaxtrack.neighbour_motion import affine_flow, unwrap_motion
 from triaxtrack.window import WindowMeasure, measure_windows
@@ -421,12 +421,12 @@ def track_frames(
     camera: str,
     report: Collection[int],
     cfg: TrackingConfig | None = None,
-    grid: MembraneGrid | None = None,
+    grid: DotGrid | None = None,
 ) -> pd.DataFrame:
     """Follow the labelled targets of ``labels`` (one camera's frame, ``LABELS`` columns; the
     unlabelled detections, id -1, only set each target's spacing) through ``frames``
     (``(test frame, grey image or None)`` in order, starting at the labels' frame). With the
-    kit's membrane ``grid`` (:func:`triaxtrack.completion.membrane_grid`), the membrane dots not
+    kit's membrane ``grid`` (:func:`triaxtrack.completion.dot_grid`), the membrane dots not
     labelled are taken on once they can be seen between reported neighbours
     (:mod:`triaxtrack.completion`), and reported from then on.
 
@@ -467,7 +467,7 @@ def track_frames(
 
 
 def _complete(
-    state: _State, gray: np.ndarray, cand: Candidates, grid: MembraneGrid, uv: np.ndarray, cfg: TrackingConfig
+    state: _State, gray: np.ndarray, cand: Candidates, grid: DotGrid, uv: np.ndarray, cfg: TrackingConfig
 ) -> tuple[Candidates, Found]:
     """One frame of :func:`triaxtrack.completion.complete_grid` from the targets reported in it
     (``uv`` (n, 2), NaN where not), the dots taken on added to ``state`` (:func:`_adopt`)."""

@@ -5,7 +5,7 @@ import time
 import yaml
 
 from triaxtrack.codec_lag import lag_corrected
-from triaxtrack.completion import membrane_grid
+from triaxtrack.completion import dot_grid
 from triaxtrack.frames import ProcessedTestFrames, iter_test_frames, keyframe_test_frames
 from triaxtrack.kit import load_kit_design
 from triaxtrack.logs import log_to
@@ -28,7 +28,7 @@ else:
     frames = iter_test_frames(snakemake.input.video, fmap, plan.first, plan.end)
 t0 = time.perf_counter()
 complete = snakemake.params.tracking["complete_grid"]
-grid = membrane_grid(load_kit_design(snakemake.input.kit)) if complete else None
+grid = dot_grid(load_kit_design(snakemake.input.kit)) if complete else None
 tracks = track_frames(frames, labels, camera, plan.report, cfg, grid)
 seconds = time.perf_counter() - t0
 mode = f"fast mode: {frames.decoded} frames decoded ({frames.seeks} seeks)" if fast else "every frame decoded"
