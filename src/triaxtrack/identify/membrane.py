@@ -69,12 +69,15 @@ def _label_membrane(f: _Frame, pool: _Pool, centres: dict, design: dict, p: Iden
     # then the dots no pedestal CT led to (beyond a longitudinal stripe's band): their regions
     # are fixed across the band below. Strips two columns wide are seeded last, from what the
     # wider regions left
+    # (between the pedestals' CTs; a pedestal out of the picture, a close camera's, bounds
+    # nothing: the image's edge does)
     tops = [a.top[0] @ axis for a in anchors if a.top is not None]
     bottoms = [a.bottom[0] @ axis for a in anchors if a.bottom is not None]
-    if tops and bottoms:
+    if tops or bottoms:
         s = f.pos @ axis
+        lo, hi = np.mean(tops) if tops else -np.inf, np.mean(bottoms) if bottoms else np.inf
         for narrow in (False, True):
-            for k in np.nonzero(pool.free & (s > np.mean(tops)) & (s < np.mean(bottoms)))[0]:
+            for k in np.nonzero(pool.free & (s > lo) & (s < hi))[0]:
                 regions += _grow_region(pool, int(k), axis, p.gate, narrow)
     ctx = _MembraneView.of(regions, anchors, axis, f.pos, design)
     phases = [_grid_phase(g, area, p) if len(g) >= p.min_region_dots else None for g in regions]
