@@ -32,8 +32,8 @@ from triaxtrack.identify import (
     label_frame,
     settle_offsets,
 )
-from triaxtrack.identify.anchors import MAX_PITCH_CHANGE, _anchor_offsets, _MembraneView
-from triaxtrack.identify.cell import _row_pitch_px, _straight_chains
+from triaxtrack.identify.anchors import MAX_PITCH_CHANGE, ROW_PITCH_RANGE, _anchor_offsets, _MembraneView
+from triaxtrack.identify.cell import _over_chain_neighbours, _row_pitch_px, _straight_chains
 from triaxtrack.identify.coded import _ct_stripes, _plausible_cts
 from triaxtrack.identify.state import UNLABELLED
 from triaxtrack.kit import coded_target_polygons, ct_codes, load_kit_design, target_table
@@ -200,16 +200,18 @@ def test_a_stripes_cts_far_from_its_run_are_dropped(kit):
     assert not _plausible_cts(two, design).id.isin(cts.id.iloc[:5]).any()
 
 
-@pytest.mark.parametrize("rows_below", [0, 8])
-def test_rows_are_counted_from_a_pedestal_face_only_nearby(kit, rows_below):
+@pytest.mark.parametrize(("rows_below", "spacing"), [(0, 1), (8, 1), (0, 4)])
+def test_rows_are_counted_from_a_pedestal_face_only_nearby(kit, rows_below, spacing):
     """A region's rows are read from a bottom pedestal CT with the pitch of the column's dots
     nearest it; when those are more rows from the face than MAX_PITCH_CHANGE allows (the pitch
-    of a strained membrane changes along its height) the CT does not fix the region."""
+    of a strained membrane changes along its height) the CT does not fix the region; nor when
+    its rows are ``spacing`` = 4 design pitches apart (the larger dots alone, where the small
+    ones are too small to resolve), outside ROW_PITCH_RANGE."""
     design, _, _ = kit
     m = design["membrane"]
     z_from_face = design["pedestal_targets"]["stripes"][0]["z_from_face"]
     rc = design["coded_target"]["centre_radius"]
-    s, pitch, col = 3.0, 2.37, 3.5  # px/mm, row and column pitch (mm)
+    s, pitch, col = 3.0, 2.37 * spacing, 3.5 * spacing  # px/mm, row and column pitch (mm)
     nodes = np.array([(i, j) for i in range(10) for j in range(12)])
     pos = np.c_[100 + nodes[:, 1] * col * s, 100 + nodes[:, 0] * pitch * s].astype(float)
     grid = {(int(i), int(j)): k for k, (i, j) in enumerate(nodes)}
@@ -222,7 +224,8 @@ def test_rows_are_counted_from_a_pedestal_face_only_nearby(kit, rows_below):
     p = IdentifyParams()
     got = _anchor_offsets(an, grid, nodes, pos, phase, pos, design, p, ctx)
     assert (rows_below + 0.5) * MAX_PITCH_CHANGE > p.row_tolerance or rows_below == 0
-    if rows_below == 0:
+    assert not ROW_PITCH_RANGE[0] <= 4 <= ROW_PITCH_RANGE[1]
+    if rows_below == 0 and spacing == 1:
         assert got is not None and got[1] == int(r_first - 9)
     else:
         assert got is None
@@ -298,6 +301,16 @@ def test_roundness_compared_with_the_grid_neighbours():
     ratio = _over_neighbours(ids, np.array([0.4, 0.8, 1.0, 0.9, 0.5, 0.7]), m)
     assert np.allclose(ratio[:4], [0.4 / 0.9, 0.8 / 0.4, 1.0 / 0.4, 0.9 / 0.4])
     assert np.isnan(ratio[4:]).all()
+
+
+def test_size_compared_with_the_stripe_neighbours():
+    """A cell-wall dot's value over the mean of its labelled neighbours along its stripe (IDs one
+    less and one more, same group); NaN where it has none, and for unlabelled dots."""
+    ids = np.array([336, 337, 338, 500, -1, 339])
+    groups = np.array(["a", "a", "a", "b", "a", "c"], object)
+    ratio = _over_chain_neighbours(ids, np.array([1.0, 3.0, 2.0, 5.0, 9.0, 4.0]), groups)
+    assert np.allclose(ratio[:3], [1.0 / 3.0, 3.0 / 1.5, 2.0 / 3.0])
+    assert np.isnan(ratio[3:]).all()  # 339 is in another group than 338
 
 
 def test_pedestal_ct_pairs_overrule_a_single_ct_but_nothing_else():

@@ -63,6 +63,11 @@ MAX_TAN_PHI = 3.0  # beyond about 72 degrees off a CT's normal, its parallax is 
 # between them and the face: it is trusted only while that stays within the row tolerance (at
 # 10 % strain, 25.6 rows read 4.4 rows off and gave 828 wrong IDs)
 MAX_PITCH_CHANGE = 0.2
+# a region's row pitch, in mm by the pedestal CT's scale, over the design's (specimen height over
+# rows): a strained membrane's rows stay well within this (0.8-1.2 at 10 % axial strain); where
+# the small dots are too small to resolve (720p, a 450 mm ring, focal 0.55 x width: 2.5 px dots)
+# the larger dots alone form a grid four rows apart, which read 39 wrong IDs on one camera
+ROW_PITCH_RANGE = (0.6, 1.6)
 
 
 @dataclass(frozen=True)
@@ -164,6 +169,9 @@ def _anchor_offsets(an: _Anchor, grid, nodes, xy, phase, pos, design, p, ctx) ->
         if len(order) < 3 or np.any(di != 1):
             continue  # the column's end rows are not all there
         pitch = float(np.median(np.abs(np.diff(d_mm[order]))))
+        row_mm = design["specimen"]["height"] / m["rows"]
+        if not ROW_PITCH_RANGE[0] <= pitch / row_mm <= ROW_PITCH_RANGE[1]:
+            continue  # not the membrane's rows (a lattice of the larger dots alone, say)
         rows_from_face = (d_mm[order[0]] - z_from_face) / pitch
         if rows_from_face * MAX_PITCH_CHANGE > p.row_tolerance:
             continue  # the column's nearest dots are too far from the face to count rows

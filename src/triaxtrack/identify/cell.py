@@ -18,6 +18,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pandas as pd
 from scipy.spatial import cKDTree
 
 from triaxtrack.identify.coded import _theta_dir
@@ -239,3 +240,15 @@ def _on_another_surface(pool: _Pool) -> np.ndarray:
     ratio = white / np.median(white[nb[:, 1:]], axis=1)
     out[free] = np.abs(ratio - 1) > WHITE_TOLERANCE
     return out
+
+
+def _over_chain_neighbours(ids: np.ndarray, values: np.ndarray, groups: np.ndarray) -> np.ndarray:
+    """Each labelled dot's value (a length, an area) over the median of its labelled neighbours
+    along its stripe (IDs one less and one more in the same group); NaN where it has none."""
+    df = pd.DataFrame({"id": np.asarray(ids, np.int64), "g": np.asarray(groups, object),
+                       "v": np.asarray(values, np.float64)})  # fmt: skip
+    own = df[df.id > 0].drop_duplicates(["g", "id"]).set_index(["g", "id"]).v
+    nb = np.stack([own.reindex(pd.MultiIndex.from_arrays([df.g, df.id + d])).to_numpy() for d in (-1, 1)])
+    n = np.isfinite(nb).sum(axis=0)
+    mean = np.where(n > 0, np.nansum(nb, axis=0) / np.maximum(n, 1), np.nan)  # the median of two
+    return np.where(df.id.to_numpy() > 0, df.v.to_numpy() / mean, np.nan)

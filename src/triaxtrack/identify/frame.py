@@ -16,20 +16,16 @@ from triaxtrack.identify.cell import (
     _label_cell_stripes,
     _label_longitudinal,
     _on_another_surface,
+    _over_chain_neighbours,
     _row_pitch_px,
     _straight_chains,
 )
 from triaxtrack.identify.coded import _ct_maps, _inside_cts, _plausible_cts
 from triaxtrack.identify.grid import _Pool
-from triaxtrack.identify.membrane import (
-    _design_diameter,
-    _is_membrane,
-    _label_membrane,
-    _membrane_row_ends,
-    _over_neighbours,
-)
+from triaxtrack.identify.membrane import _is_membrane, _label_membrane, _membrane_row_ends, _over_neighbours
 from triaxtrack.identify.merged import _recentred_beside_edge, _split_merged_pairs
 from triaxtrack.identify.state import LABEL_COLUMNS, NOT_REACHED, UNLABELLED, IdentifyParams, _Frame
+from triaxtrack.kit import target_table
 
 # a membrane dot beside a dark edge this much less round than its grid neighbours (seen at the
 # same angle) has merged with the edge's fringe: on the demo one at 0.52 was 1.4 px off; 0.45 %
@@ -40,11 +36,15 @@ MERGED_ROUNDNESS_RATIO = 0.55
 # most 0.39 px off; the largest (1.8) was 0.93 px off; on soft footage (720p, 1 px blur) an end-row
 # dot at 2x its neighbours' area was 1.28 px off without a gap beside it
 MERGED_AREA_RATIO = 1.5
-# a membrane blob whose long axis (over its printed diameter) is this much longer than its grid
-# neighbours' holds more than one dot, or a dot and an edge's fringe, wherever it is: on the 10 %
-# strain test at 720p (nvr, 16 cameras, 4 chunk starts, 70,070 labelled membrane dots) the two
-# wrong IDs (end-row dots merged with the row beside them or the pedestal's edge, 1.2 and 2.3 px
-# off) were 1.75 and 1.96 times their neighbours' length; 18 dots (0.03 %) were over 1.6
+# a dot whose blob's long axis (over its printed diameter) is this much longer than its grid
+# neighbours' (membrane) or its stripe neighbours' (cell wall) holds more than one dot, or a dot
+# and an edge's fringe, wherever it is: on the 10 % strain test at 720p (nvr, 16 cameras, 4 chunk
+# starts, 70,070 labelled membrane dots) the two wrong IDs (end-row dots merged with the row
+# beside them or the pedestal's edge, 1.2 and 2.3 px off) were 1.75 and 1.96 times their
+# neighbours' length, and 18 dots (0.03 %) over 1.6. Along a cell-wall stripe the same holds of
+# the area over the printed diameter squared: a cell band's last dot at a silhouette (450 mm ring,
+# 1080p), merged with the dot beside it, 1.2 px off, was 1.85 times its neighbour's area; 7 of
+# 4,433 cell-wall dots on four tests (clean and nvr, 720p and 1080p) were over 1.6
 MERGED_LENGTH_RATIO = 1.6
 FAR_PX = 1e9
 # a membrane dot whose image comes within this of a longitudinal band's (beyond its moment
@@ -148,6 +148,10 @@ def identify(
     cell_round = np.where(recentred, p.min_recentred_roundness, cell_round)
     row_end, row_gap = _membrane_row_ends(f.ids, m)
     at_border = blobs.at_border.to_numpy(bool, copy=True) if "at_border" in blobs else np.zeros(n, bool)
+    # each blob's long axis over its target's printed diameter
+    diameter = target_table(design).set_index("id").diameter_mm.reindex(f.ids).to_numpy()
+    length = blobs.major_px.to_numpy() / diameter
+    area = blobs.area_px.to_numpy() / diameter**2
     for bad, why in (
         (at_border, "cut by the image border"),
         (blobs.area_px.to_numpy() < np.where(membrane, p.min_membrane_area_px, cell_area),
@@ -160,8 +164,11 @@ def identify(
          "larger than its neighbours beside a dark edge (merged with the edge)"),
         ((_over_neighbours(f.ids, blobs.roundness.to_numpy(), m) < MERGED_ROUNDNESS_RATIO) & edge,
          "less round than its neighbours, beside a dark edge (merged with the edge's fringe)"),
-        (_over_neighbours(f.ids, blobs.major_px.to_numpy() / _design_diameter(f.ids, m), m) > MERGED_LENGTH_RATIO,
+        (_over_neighbours(f.ids, length, m) > MERGED_LENGTH_RATIO,
          "longer than its grid neighbours (two dots, or a dot and an edge, merged)"),
+        (~membrane & (np.fmax(_over_chain_neighbours(f.ids, length, f.group),
+                              _over_chain_neighbours(f.ids, area, f.group)) > MERGED_LENGTH_RATIO),
+         "larger than its neighbours along its stripe (two dots, or a dot and an edge, merged)"),
     ):  # fmt: skip
         bad &= f.ids != UNLABELLED
         f.ids[bad] = UNLABELLED

@@ -243,17 +243,6 @@ def _grid_neighbour(ids: np.ndarray, m: dict, dr: int, dc: int) -> np.ndarray:
     return np.where((row >= 0) & (row < m["rows"]), row * m["columns"] + col + m["first_id"], 0)
 
 
-def _design_diameter(ids: np.ndarray, m: dict) -> np.ndarray:
-    """Printed diameter (mm) of each membrane dot of ``ids`` (the larger dots on every
-    ``large_step``-th row and column, as :func:`triaxtrack.kit.target_table`); NaN elsewhere."""
-    k = np.asarray(ids, np.int64) - m["first_id"]
-    r, c = k // m["columns"] + 1, k % m["columns"] + 1
-    step, first = m["large_step"], m["large_first"]
-    large = ((r - first) % step == 0) & ((c - first) % step == 0) & (r >= first) & (c >= first)
-    d = np.where(large, m["large_dot_diameter"], m["small_dot_diameter"]).astype(np.float64)
-    return np.where(_is_membrane(ids, m), d, np.nan)
-
-
 def _over_neighbours(ids: np.ndarray, values: np.ndarray, m: dict) -> np.ndarray:
     """Each membrane dot's value (roundness, area) over the median of its labelled grid
     neighbours' (row and column, around the specimen); NaN where it has none or is not a
