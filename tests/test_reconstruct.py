@@ -327,6 +327,23 @@ def test_a_camera_without_wall_targets_is_posed_through_the_wall(scene):
     _check_poses(rec, scene["cameras"])
 
 
+def test_cameras_that_share_too_few_wall_targets_are_posed_through_it(scene):
+    """Two cameras each pose from their own strip of the wall, with no target in common (close
+    cameras far apart): no bundle to adjust, so every camera is posed through the wall against
+    the nominal cell (it raised LinAlgError from an empty similarity transform)."""
+    wall, water = _wall_and_water(scene)
+    labels = scene["labels"]
+    on_wall = labels["id"].isin(wall["id"])
+    first = labels.loc[on_wall & (labels["camera"] == "cam01"), "id"]
+    second = (labels["camera"] == "cam02") & ~labels["id"].isin(first)
+    keep = ~on_wall | (labels["camera"] == "cam01") | second
+    cell = scene["cell"]
+    rec = reconstruct_cell(scene["intrinsics"], labels[keep], wall, SfmConfig(), water=water, cell=cell)
+    assert rec.nominal and not rec.dropped and len(rec.cameras) == len(scene["cameras"])
+    assert {v["pose_from"] for v in rec.posed_from.values()} == {"water"}
+    _check_poses(rec, scene["cameras"])
+
+
 @pytest.fixture(scope="module")
 def close_ring(design, table):
     """Three cameras of a closer ring (radius 300 mm) that label no cell-wall target at all."""

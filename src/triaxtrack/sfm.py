@@ -304,9 +304,11 @@ def axis_frame(
 
 def _air_reconstruction(
     posed: dict[str, Camera], obs: pd.DataFrame, design: pd.DataFrame, cfg: SfmConfig
-) -> CellReconstruction:
+) -> CellReconstruction | None:
     """Steps 2-4 of the module docstring for the cameras ``posed`` in air (two or more), from
-    their PnP observations ``obs`` (with ``inlier``)."""
+    their PnP observations ``obs`` (with ``inlier``); None when fewer than ``cfg.min_targets``
+    cell-wall targets are seen by two of them (cameras close to the cell, each seeing a strip of
+    its bands, far apart): no bundle to adjust."""
     used = obs["inlier"].to_numpy().copy()
     reason = np.where(used, "", "PnP outlier").astype(object)
     for rounds in range(1, MAX_BA_ROUNDS + 1):
@@ -315,6 +317,8 @@ def _air_reconstruction(
         reason[used & ~multi] = "seen by one camera"
         used &= multi
         sel = obs[used]
+        if sel["id"].nunique() < cfg.min_targets:
+            return None
         adj_cams, adj_pts = bundle_adjust(
             posed, sel, design[design["id"].isin(sel["id"])], cfg.refine_intrinsics
         )
@@ -433,13 +437,11 @@ def reconstruct_cell(
     through_water = water is not None and cell is not None and cfg.pose_from_water
     for name in sorted(set(cameras) - set(posed) - set(dropped)):
         dropped[name] = "no frame with enough labelled cell-wall targets"
-    if len(posed) >= 2:
-        rec = _air_reconstruction(posed, obs, design, cfg)
-    elif through_water:
+    rec = _air_reconstruction(posed, obs, design, cfg) if len(posed) >= 2 else None
+    if rec is None and through_water:
+        why = "no cell frame from the wall" if len(posed) < 2 else "the wall's targets too few in common"
         rec = _nominal_reconstruction(cell, labels)
-        dropped = {n: dropped.get(n, "no cell frame from the wall: posed through it") for n in cameras}
-    else:
-        rec = None
+        dropped = {n: dropped.get(n, f"{why}: posed through it") for n in cameras}
     if rec is not None and through_water and dropped:
         rec = _add_water_cameras(rec, cameras, labels, design, water, cell, cfg, dropped)
         dropped = rec.dropped
@@ -452,8 +454,10 @@ def reconstruct_cell(
         why = "; ".join(
             f"{n}: {counts.get(n, 'nothing')} labelled: {dropped.get(n, 'posed')}" for n in sorted(cameras)
         )
-        n = len(posed) if rec is None else len(rec.cameras)
-        raise ValueError(f"cameras and cell: only {n} camera(s) could be posed; {why}")
+        alone = rec is None and len(posed) > 1
+        n = len(rec.cameras) if rec is not None else 0 if alone else len(posed)
+        shared = f" ({len(posed)} posed alone share too few cell-wall targets)" if alone else ""
+        raise ValueError(f"cameras and cell: only {n} camera(s) could be posed{shared}; {why}")
     return replace(rec, dropped=dict(sorted(dropped.items())))
 
 
