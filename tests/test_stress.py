@@ -218,6 +218,9 @@ def test_exports_open_in_pandas_and_meshio(tmp_path, design, table, series, simu
     )
     assert not loads, loads
     assert not re.search(r"@import\s+(?:url\()?[\"']?(?:https?:)?//", html, re.I)
+    # no frame measured (the top cap out of every picture, say): a page that says why, no error
+    empty = viewer_html([], "e_zz", "test", [(0, "only 0 top-cap coded targets measured")] * 3)
+    assert "No frame" in empty and "only 0 top-cap coded targets measured (3 frames)" in empty
 
 
 def test_stress_figures_and_table_schema(tmp_path, simulated):

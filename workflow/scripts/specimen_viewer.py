@@ -11,5 +11,6 @@ log_to(snakemake.log[0])
 i, p = snakemake.input, snakemake.params
 series = list(measured_membrane_frames(i.kit, i.volume, i.points, p.volume, p.max_frames))
 shown = [f for f in series if isinstance(f, MembraneFrame)]
-Path(snakemake.output.html).write_text(viewer_html(shown, p.colour_by, p.name))
+skipped = [f for f in series if not isinstance(f, MembraneFrame)]
+Path(snakemake.output.html).write_text(viewer_html(shown, p.colour_by, p.name, skipped))
 print(f"viewer: {len(shown)} of {len(series)} frames")

@@ -18,15 +18,26 @@ def _triangles(n_r: int, n_c: int) -> np.ndarray:
     return np.vstack([q[:, [0, 1, 2]], q[:, [0, 2, 3]]])
 
 
-def viewer_html(frames: list[MembraneFrame], colour_by: str = "e_zz", title: str = "specimen") -> str:
+def viewer_html(
+    frames: list[MembraneFrame], colour_by: str = "e_zz", title: str = "specimen",
+    skipped: list[tuple[int, str]] = (),
+) -> str:  # fmt: skip
     """The page: a plotly Mesh3d of each frame's membrane surface (mm, cell frame), coloured by
     ``colour_by`` (Green-Lagrange, tension positive, %, a diverging scale symmetric about 0),
     one slider step per frame (its test-clock time), play and pause buttons.
-    ``include_plotlyjs=True``: the page works offline. ValueError without frames."""
+    ``include_plotlyjs=True``: the page works offline. Without frames, a page that says so and
+    gives the reasons of the frames not shown (``skipped``: (frame, reason))."""
     import plotly.graph_objects as go
 
     if not frames:
-        raise ValueError("the viewer needs at least one frame")
+        from collections import Counter
+        from html import escape
+
+        why = "".join(f"<li>{escape(r)} ({n} frames)</li>" for r, n in Counter(r for _, r in skipped).items())
+        head = f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>{escape(title)}</title></head>"
+        return (f"{head}<body><h1>{escape(title)}</h1><p>No frame of this test could be measured, so "
+                f"there is no surface to show (volume.parquet gives each frame's reason).</p>"
+                f"<ul>{why}</ul></body></html>")  # fmt: skip
     if colour_by not in STRAIN_LABELS:
         raise ValueError(f"colour_by must be one of {sorted(STRAIN_LABELS)}, not {colour_by!r}")
     n_r, n_c = frames[0].xyz.shape[:2]
