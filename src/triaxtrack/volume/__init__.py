@@ -57,7 +57,7 @@ On the simulator's synthetic frames the soil volume is exact to ~3e-7 (1e-5 in a
 see above); 0.02 mm noise on every point gives ~5e-5 (mostly the top cap's height).
 """
 
-from triaxtrack.volume.cap import TopCap, rigid_fit, top_cap
+from triaxtrack.volume.cap import TopCap, rigid_fit, top_cap, top_cap_from_membrane
 from triaxtrack.volume.grid import (
     MAX_MISSING_SHARE,
     WARN_MISSING_SHARE,
@@ -85,5 +85,6 @@ __all__ = [
     "MAX_MISSING_SHARE", "REFINE_LEVELS", "WARN_MISSING_SHARE", "FaceEnds", "MembraneGrid", "TopCap",
     "VolumeResult", "VolumeUncertainty", "check_mesh", "closed_mesh", "face_ends", "fill_grid",
     "frame_grid", "membrane_grid", "membrane_thickness", "rigid_fit", "signed_volume", "specimen_volume",
-    "strain_field", "top_cap", "volume_meshes", "volume_series", "volume_uncertainty", "write_ply",
+    "strain_field", "top_cap", "top_cap_from_membrane", "volume_meshes", "volume_series",
+    "volume_uncertainty", "write_ply",
 ]  # fmt: skip

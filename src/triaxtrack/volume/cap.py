@@ -34,6 +34,7 @@ class TopCap:
     height_mm: float
     n_targets: int
     rms_mm: float
+    source: str = "coded targets"  # or "membrane top rows" (:func:`top_cap_from_membrane`)
 
 
 def rigid_fit(src: np.ndarray, dst: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -69,3 +70,54 @@ def top_cap(points: pd.DataFrame, table: pd.DataFrame, design: dict) -> TopCap:
     return TopCap(
         _readonly(rot), _readonly(trans), _readonly(face), _readonly(normal), float(face[2]), len(meas), rms
     )
+
+
+MIN_CAP_COLUMNS = 8  # membrane columns with their two top rows measured, for a cap from them
+
+
+def top_cap_from_membrane(points: pd.DataFrame, table: pd.DataFrame, design: dict) -> TopCap:
+    """The top cap's face from the membrane's topmost measured rows, where its coded targets are
+    in no picture (a camera ring low down). The topmost row ``r`` with at least
+    ``MIN_CAP_COLUMNS`` columns measured in it and in the row below gives, per such column, the
+    face ``k = r - top + 0.5`` current row pitches above row ``r`` (the design puts the face half a
+    pitch above the top row); a plane fitted to those points is the face. The cap is taken
+    centred on the axis, its rotation the smallest that tilts z to the plane's normal.
+    ``n_targets``: the columns used; ``rms_mm``: the plane's residual combined with the unknown
+    strain over those ``k`` pitches (taken as large as the pitch's own change from the design),
+    so that the volume's uncertainty carries it. ValueError when no row pair has enough columns."""
+    mem = table[table["surface"] == "membrane"]
+    xyz = points.dropna(subset=["x_mm", "y_mm", "z_mm"]).drop_duplicates("id").set_index("id")
+    got = mem.assign(x=xyz["x_mm"].reindex(mem["id"]).to_numpy(), y=xyz["y_mm"].reindex(mem["id"]).to_numpy(),
+                     z=xyz["z_mm"].reindex(mem["id"]).to_numpy()).dropna(subset=["z"])  # fmt: skip
+    by_row = {int(r): g.set_index("col")[["x", "y", "z"]] for r, g in got.groupby("row")}
+    design_z = mem.groupby("row")["z_mm"].first()
+    top = int(mem["row"].min())
+    for r in sorted(by_row):
+        both = by_row[r].index.intersection(by_row[r + 1].index) if r + 1 in by_row else []
+        if len(both) >= MIN_CAP_COLUMNS:
+            break
+    else:
+        raise ValueError("fewer than 3 top-cap coded targets and no two membrane rows measured on "
+                         f"{MIN_CAP_COLUMNS} columns: no top cap")  # fmt: skip
+    p1, p2 = by_row[r].loc[both].to_numpy(float), by_row[r + 1].loc[both].to_numpy(float)
+    k = r - top + 0.5
+    face_pts = p1 + k * (p1 - p2)
+    a = np.c_[np.ones(len(face_pts)), face_pts[:, :2]]
+    coef, *_ = np.linalg.lstsq(a, face_pts[:, 2], rcond=None)
+    plane_rms = float(np.sqrt(np.mean((a @ coef - face_pts[:, 2]) ** 2)))
+    normal = np.array([-coef[1], -coef[2], 1.0]) / np.hypot(1.0, np.hypot(coef[1], coef[2]))
+    axis = np.cross([0.0, 0.0, 1.0], normal)
+    sin, cos = float(np.linalg.norm(axis)), float(normal[2])
+    rot = np.eye(3)
+    if sin > 1e-15:
+        kx = np.cross(np.eye(3), axis / sin)  # the cross-product matrix of the unit axis
+        rot = np.eye(3) + sin * kx + (1 - cos) * kx @ kx
+    face = np.array([0.0, 0.0, coef[0]])
+    z_face = float(surface_by_name(design)["pedestal_top"]["z_min"])
+    trans = face - rot @ np.array([0.0, 0.0, z_face])
+    pitch = float(np.median(p1[:, 2] - p2[:, 2]))
+    dof = max(3 * len(both) - 6, 1)
+    unknown = k * abs(pitch - float(design_z[r] - design_z[r + 1]))
+    rms = float(np.hypot(plane_rms, unknown * np.sqrt(dof)))
+    return TopCap(_readonly(rot), _readonly(trans), _readonly(face), _readonly(normal), float(face[2]),
+                  len(both), rms, "membrane top rows")  # fmt: skip

@@ -9,7 +9,7 @@ import numpy as np
 import pandas as pd
 
 from triaxtrack.tables import VOLUME_RESULT, conform
-from triaxtrack.volume.cap import TopCap, top_cap
+from triaxtrack.volume.cap import TopCap, top_cap, top_cap_from_membrane
 from triaxtrack.volume.grid import (
     MAX_MISSING_SHARE,
     WARN_MISSING_SHARE,
@@ -43,8 +43,12 @@ def measured_share(points: pd.DataFrame, table: pd.DataFrame) -> float:
 def frame_grid(
     points: pd.DataFrame, table: pd.DataFrame, design: dict, t0: float, max_missing_share: float
 ) -> tuple[MembraneGrid, TopCap, FaceEnds]:
-    """One frame's top cap, face rings and filled membrane grid (ValueError when it fails)."""
-    cap = top_cap(points, table, design)
+    """One frame's top cap (from its coded targets, else from the membrane's top rows), face
+    rings and filled membrane grid (ValueError when it fails)."""
+    try:
+        cap = top_cap(points, table, design)
+    except ValueError:
+        cap = top_cap_from_membrane(points, table, design)
     ends = face_ends(design, cap, t0)
     return membrane_grid(points, table, max_missing_share, ends), cap, ends
 
@@ -114,6 +118,8 @@ def volume_series(
             warnings.append(f"{1 - share:.1%} of the membrane dots filled")
         if not np.isfinite(unc.fill_mm3):
             warnings.append("the fill's uncertainty is unknown (no leave-out place)")
+        if cap.source != "coded targets":
+            warnings.append(f"top cap from the {cap.source} (its coded targets not measured)")
         if k0 != frames[0]:
             warnings.append(f"strains relative to frame {k0}: the first frame {frames[0]} failed")
         axial = (h0 - res.height_mm) / h0
