@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
 import pandas as pd
 
@@ -108,10 +109,7 @@ def top_cap_from_membrane(points: pd.DataFrame, table: pd.DataFrame, design: dic
     normal = np.array([-coef[1], -coef[2], 1.0]) / np.hypot(1.0, np.hypot(coef[1], coef[2]))
     axis = np.cross([0.0, 0.0, 1.0], normal)
     sin, cos = float(np.linalg.norm(axis)), float(normal[2])
-    rot = np.eye(3)
-    if sin > 1e-15:
-        kx = np.cross(np.eye(3), axis / sin)  # the cross-product matrix of the unit axis
-        rot = np.eye(3) + sin * kx + (1 - cos) * kx @ kx
+    rot = np.eye(3) if sin < 1e-15 else cv2.Rodrigues(axis / sin * np.arctan2(sin, cos))[0]
     face = np.array([0.0, 0.0, coef[0]])
     z_face = float(surface_by_name(design)["pedestal_top"]["z_min"])
     trans = face - rot @ np.array([0.0, 0.0, z_face])
