@@ -30,8 +30,9 @@ carries no weight, so a static test gives no correction.
 
 Each P frame's membrane dots are then moved forward by ``lag x'`` (``x'`` the dot's velocity
 from its own centroids, pixels per frame) and by the field, the coefficients interpolated
-linearly in time between those measured just after the previous keyframe and just before the
-next (or held from the one side measured). What is left: a departure that grows within the
+linearly in time across the GOP, from those measured just after its keyframe to those measured just
+before the next (a GOP cut by the chunk's start or end takes its missing end from the chunk's
+neighbouring GOP). What is left: a departure that grows within the
 last few frames of a GOP (x264's rate control spends fewer bits on frames no later frame
 refers to) is measured only as its mean over the ``SIDE_FRAMES`` before the keyframe.
 Keyframes, and the other targets (cell wall, pedestal CTs), are left as they are. A chunk with no
@@ -155,9 +156,13 @@ def estimate_lag(tracks: pd.DataFrame, keyframes: np.ndarray) -> pd.DataFrame:
 
 def _coefficients(frames: np.ndarray, keyframes: np.ndarray, lags: pd.DataFrame) -> np.ndarray:
     """(F, 7) lag and field coefficients of each of ``frames``: 0 at keyframes; in a P frame
-    interpolated linearly in time between those measured after the previous keyframe and
-    before the next one, or held from the one side measured; NaN where neither is. A lag within
-    ``SIGNIFICANT_SIGMAS`` standard errors of zero counts as 0."""
+    interpolated linearly in time across its GOP, from the departure measured just after the
+    GOP's keyframe to that measured just before the next keyframe. A GOP cut by the chunk's
+    start or end (one of its keyframes not in ``keyframes``) takes the missing end from the
+    neighbouring GOP of the chunk (a recorder's GOPs are alike: the departure after the next
+    keyframe, or before the previous one) and its length from the chunk's keyframe spacing;
+    with one keyframe only, the side measured is held. NaN where nothing is measured. A lag
+    within ``SIGNIFICANT_SIGMAS`` standard errors of zero counts as 0."""
     frames = np.asarray(frames, np.int64)
     keys = np.sort(np.asarray(keyframes, np.int64))
     lag = lags["lag_frames"].where(lags["lag_frames"].abs() > SIGNIFICANT_SIGMAS * lags["sigma_frames"], 0.0)
@@ -165,15 +170,25 @@ def _coefficients(frames: np.ndarray, keyframes: np.ndarray, lags: pd.DataFrame)
     sides = list(zip(lags["keyframe"].astype(int), lags["side"], strict=True))
     after = {k: vec[i] for i, (k, s) in enumerate(sides) if s > 0}
     before = {k: vec[i] for i, (k, s) in enumerate(sides) if s < 0}
+    gop = int(np.median(np.diff(keys))) if len(keys) > 1 else None
     out = np.full((len(frames), 7), np.nan)
     for i, f in enumerate(frames):
         if np.isin(f, keys):
             out[i] = 0.0
             continue
-        prev, nxt = keys[keys < f].max(initial=-1), keys[keys > f].min(initial=-1)
-        a, b = after.get(int(prev)), before.get(int(nxt))
-        if a is not None and b is not None:
-            out[i] = a + (b - a) * (f - prev) / (nxt - prev)
+        earlier, later = keys[keys < f], keys[keys > f]
+        prev = int(earlier.max()) if len(earlier) else None
+        nxt = int(later.min()) if len(later) else None
+        a = after.get(prev) if prev is not None else after.get(nxt)  # the GOP's start
+        b = before.get(nxt) if nxt is not None else before.get(prev)  # and its end
+        if prev is not None and nxt is not None:
+            span, t = nxt - prev, f - prev
+        elif gop is not None:  # cut by the chunk: a GOP as long as the chunk's others
+            span, t = gop, (f - prev if prev is not None else gop - (nxt - f))
+        else:
+            span, t = None, None
+        if a is not None and b is not None and span is not None:
+            out[i] = a + (b - a) * np.clip(t / span, 0.0, 1.0)
         elif a is not None or b is not None:
             out[i] = a if a is not None else b
     return out
