@@ -4,7 +4,15 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from triaxtrack.codec_lag import estimate_lag, lag_corrected, lag_per_frame
+from triaxtrack.codec_lag import (
+    corrected_tracks,
+    estimate_lag,
+    estimate_lag_chunks,
+    lag_corrected,
+    lag_per_frame,
+    read_lags,
+    write_lags,
+)
 
 FRAMES = np.arange(61)
 KEYS = np.array([0, 30, 60])
@@ -126,3 +134,33 @@ def test_a_departure_growing_along_the_gop_is_removed_in_every_p_frame(first, la
     p = ~np.isin(frames, KEYS)
     assert rms(chunk)[p].max() > 0.1  # the departure this corrects
     assert rms(fixed)[p].max() < 0.02  # 0.01 px of centroid noise
+
+
+@pytest.mark.parametrize("size", [7, 10, 45])
+def test_chunks_shorter_than_a_gop_are_measured_and_corrected_from_both_ends(size, tmp_path):
+    """Chunks of ``size`` frames (7 and 10: most hold no keyframe of the 30-frame GOPs): the
+    camera's departures are measured over its chunks in order (:func:`estimate_lag_chunks`),
+    as on the whole test at once, written and read back, and each chunk corrected from them."""
+    tracks, truth = _tracks(lag=0.02, noise=0.01)
+    shrunk = _growing_shrink(tracks, KEYS, 2e-5)
+    starts = range(0, len(FRAMES), size)
+    chunks = [shrunk[shrunk["frame"].between(a, a + size - 1)] for a in starts]
+    whole = estimate_lag(shrunk, KEYS)
+    lags = estimate_lag_chunks(iter(chunks), KEYS)
+    pd.testing.assert_frame_equal(lags, whole, check_dtype=False)
+    path = tmp_path / "cam01.json"
+    write_lags(path, "cam01", KEYS, lags)
+    camera, keys, back = read_lags(path)
+    assert camera == "cam01" and np.array_equal(keys, KEYS)
+    pd.testing.assert_frame_equal(back, lags, check_dtype=False)
+    fixed = pd.concat([corrected_tracks(c, {camera: (keys, back)}) for c in chunks])
+    u = fixed.sort_values(["frame", "id"])[["u_px", "v_px"]].to_numpy().reshape(len(FRAMES), -1, 2)
+    err = np.sqrt(((u - truth) ** 2).sum(axis=2).mean(axis=1))
+    assert err[~np.isin(FRAMES, KEYS)].max() < 0.025  # 0.014 px of centroid noise
+
+
+def test_a_bad_lag_file_names_itself(tmp_path):
+    path = tmp_path / "cam01.json"
+    path.write_text("{}")
+    with pytest.raises(ValueError, match="cam01.json: not a codec-lag file"):
+        read_lags(path)

@@ -107,6 +107,7 @@ def test_default_config_is_demo_13_cameras_2_chunks():
     assert counts["make_kit"] == 1
     assert counts["calibrate_camera"] == counts["frame_map"] == 13
     assert counts["identify_targets"] == counts["track_targets"] == 13 * 2
+    assert counts["measure_codec_lag"] == 13  # per camera, over all its chunks
     assert counts["collect_labels"] == counts["reconstruct_cell"] == counts["trace_specimen"] == 1
     assert counts["triangulate_chunk"] == 2  # per chunk, all cameras
     assert counts["collect_timesteps"] == counts["measure_volume"] == 1

@@ -35,12 +35,21 @@ before the next (a GOP cut by the chunk's start or end takes its missing end fro
 neighbouring GOP). What is left: a departure that grows within the
 last few frames of a GOP (x264's rate control spends fewer bits on frames no later frame
 refers to) is measured only as its mean over the ``SIDE_FRAMES`` before the keyframe.
-Keyframes, and the other targets (cell wall, pedestal CTs), are left as they are. A chunk with no
-keyframe measured (a GOP longer than the chunk) is left uncorrected, and its log says so.
-Frames are test frames; pixels in OpenCV's convention.
+Keyframes, and the other targets (cell wall, pedestal CTs), are left as they are.
+
+In the workflow, rule ``measure_codec_lag`` measures one camera at every keyframe of the test
+over its chunks of tracks in order (:func:`estimate_lag_chunks`: a keyframe's two sides may lie
+in different chunks, so a chunk shorter than the GOP is measured and corrected like any other)
+and writes ``results/<test>/codec_lag/<camera>.json`` (:func:`write_lags`, :func:`read_lags`);
+``triangulate_chunk`` corrects each chunk's tracks with every camera's file
+(:func:`corrected_tracks`). Frames are test frames; pixels in OpenCV's convention.
 """
 
 from __future__ import annotations
+
+import json
+from collections.abc import Iterable, Mapping
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -120,10 +129,27 @@ def _design(vel: np.ndarray, uv: np.ndarray) -> np.ndarray:
     return A
 
 
-def estimate_lag(tracks: pd.DataFrame, keyframes: np.ndarray) -> pd.DataFrame:
+def _fit_side(d: np.ndarray, vel: np.ndarray, at_k: np.ndarray) -> tuple:
+    """The lag and field coefficients of one side's departures (see :func:`estimate_lag`)."""
+    A = _design(vel, at_k)
+    y = np.r_[d[:, 0], d[:, 1]]
+    sol, *_ = np.linalg.lstsq(A, y, rcond=None)
+    resid = y - A @ sol
+    s2 = float(resid @ resid) / max(len(y) - A.shape[1], 1)
+    se = np.sqrt(s2 * np.diag(np.linalg.pinv(A.T @ A)))
+    coef = np.where(np.abs(sol) > SIGNIFICANT_SIGMAS * se, sol, 0.0)
+    speed = float(np.sqrt((vel * vel).sum() / len(vel)))
+    return float(sol[0]), float(se[0]), *map(float, coef[1:]), len(vel), speed
+
+
+def estimate_lag(
+    tracks: pd.DataFrame, keyframes: np.ndarray, measure: np.ndarray | None = None
+) -> pd.DataFrame:
     """How one camera's P frames depart from its keyframes, measured at each of its
     ``keyframes`` (test frames) within ``tracks`` (``TRACKS`` rows of one camera; the membrane
-    dots, IDs from 1001, are used).
+    dots, IDs from 1001, are used), or only at those of them in ``measure``. Each keyframe is
+    measured on the ``SIDE_FRAMES + FAR_FRAMES`` frames of the tracks on each side of it (up to
+    the next keyframe that way), so the tracks may span a whole test.
 
     Returns one row per keyframe and side measured: ``keyframe``, ``side`` (-1: the P frames
     before it, +1: after it), ``lag_frames`` (how many frames late those P frames show the
@@ -133,25 +159,68 @@ def estimate_lag(tracks: pd.DataFrame, keyframes: np.ndarray) -> pd.DataFrame:
     where within ``SIGNIFICANT_SIGMAS`` standard errors of zero, ``dots`` used and
     ``speed_px`` (their RMS speed, pixels per frame).
     """
-    frames, _, uv = _positions(tracks[tracks["id"] >= FIRST_MEMBRANE_ID])
-    keys = np.intersect1d(np.asarray(keyframes, np.int64), frames)
+    mem = tracks[tracks["id"] >= FIRST_MEMBRANE_ID].sort_values("frame", kind="stable")
+    f = mem["frame"].to_numpy(np.int64)
+    uf = np.unique(f)
+    fences = np.unique(np.asarray(keyframes, np.int64))
+    keys = np.intersect1d(fences, uf)
+    if measure is not None:
+        keys = np.intersect1d(keys, np.asarray(measure, np.int64))
+    reach = SIDE_FRAMES + FAR_FRAMES
     rows = []
     for k in keys:
+        i = int(np.searchsorted(uf, k))
+        lo, hi = uf[max(0, i - reach)], uf[min(len(uf) - 1, i + reach)]
+        near = mem.iloc[np.searchsorted(f, lo) : np.searchsorted(f, hi, side="right")]
+        frames, _, uv = _positions(near)
         for side in (-1, 1):
-            got = _side_fit(uv, frames, keys, int(k), side)
-            if got is None:
-                continue
-            d, vel, at_k = got
-            A = _design(vel, at_k)
-            y = np.r_[d[:, 0], d[:, 1]]
-            sol, *_ = np.linalg.lstsq(A, y, rcond=None)
-            resid = y - A @ sol
-            s2 = float(resid @ resid) / max(len(y) - A.shape[1], 1)
-            se = np.sqrt(s2 * np.diag(np.linalg.pinv(A.T @ A)))
-            coef = np.where(np.abs(sol) > SIGNIFICANT_SIGMAS * se, sol, 0.0)
-            speed = float(np.sqrt((vel * vel).sum() / len(vel)))
-            rows.append((int(k), side, float(sol[0]), float(se[0]), *map(float, coef[1:]), len(vel), speed))
+            got = _side_fit(uv, frames, fences, int(k), side)
+            if got is not None:
+                rows.append((int(k), side, *_fit_side(*got)))
     return pd.DataFrame(rows, columns=list(LAG_COLUMNS))
+
+
+def estimate_lag_chunks(chunks: Iterable[pd.DataFrame], keyframes: np.ndarray) -> pd.DataFrame:
+    """:func:`estimate_lag` over one camera's chunks of tracks, given in frame order (each
+    chunk's ``TRACKS`` without its handover frame), at every keyframe of the test: the frames on
+    both sides of a keyframe are used whichever chunks they are in, so every GOP is measured
+    at both ends whatever the chunk size. Holds only the frames still needed (those of the last
+    ``SIDE_FRAMES + FAR_FRAMES`` frames and of the keyframes not yet measured)."""
+    keys = np.unique(np.asarray(keyframes, np.int64))
+    reach = SIDE_FRAMES + FAR_FRAMES
+    held = pd.DataFrame()
+    done: set[int] = set()
+    out = []
+
+    def measure(buf: pd.DataFrame, final: bool) -> None:
+        uf = np.unique(buf["frame"].to_numpy(np.int64))
+        ready = []
+        for k in keys[np.isin(keys, uf)]:
+            after = uf[uf > k]
+            fence = keys[keys > k].min(initial=np.iinfo(np.int64).max)
+            if int(k) not in done and (final or len(after) >= reach or fence <= uf[-1]):
+                ready.append(int(k))
+        if ready:
+            out.append(estimate_lag(buf, keys, np.array(ready)))
+            done.update(ready)
+
+    for chunk in chunks:
+        part = chunk[chunk["id"] >= FIRST_MEMBRANE_ID]
+        held = part if held.empty else pd.concat([held, part], ignore_index=True)
+        if held.empty:
+            continue
+        measure(held, final=False)
+        uf = np.unique(held["frame"].to_numpy(np.int64))
+        pending = keys[np.isin(keys, uf) & ~np.isin(keys, list(done))]
+        keep_from = uf[max(0, len(uf) - reach - 1)]
+        if len(pending):
+            keep_from = min(keep_from, uf[max(0, int(np.searchsorted(uf, pending.min())) - reach)])
+        held = held[held["frame"] >= keep_from]
+    if not held.empty:
+        measure(held, final=True)
+    if not out:
+        return pd.DataFrame(columns=list(LAG_COLUMNS))
+    return pd.concat(out, ignore_index=True).sort_values(["keyframe", "side"], ignore_index=True)
 
 
 def _coefficients(frames: np.ndarray, keyframes: np.ndarray, lags: pd.DataFrame) -> np.ndarray:
@@ -251,3 +320,51 @@ def lag_corrected(tracks: pd.DataFrame, keyframes: np.ndarray) -> tuple[pd.DataF
     frames) and removed: ``(corrected tracks, lags)`` (:func:`estimate_lag`'s table)."""
     lags = estimate_lag(tracks, keyframes)
     return correct_lag(tracks, keyframes, lags), lags
+
+
+# ---------------------------------------------------------------- the per-camera lag file
+
+
+def write_lags(
+    path: str | Path, camera: str, keyframes: np.ndarray, lags: pd.DataFrame, note: str = ""
+) -> None:
+    """Write one camera's measured departures (``results/<test>/codec_lag/<camera>.json``):
+    its keyframes (test frames, every one of the test), :func:`estimate_lag`'s rows and a
+    ``note`` (why nothing is measured or applied, if so)."""
+    doc = {
+        "camera": camera,
+        "keyframes": [int(k) for k in np.asarray(keyframes, np.int64)],
+        "columns": list(LAG_COLUMNS),
+        "lags": lags[list(LAG_COLUMNS)].astype(float).to_numpy().tolist(),
+        "note": note,
+    }
+    Path(path).write_text(json.dumps(doc, indent=1) + "\n")
+
+
+def read_lags(path: str | Path) -> tuple[str, np.ndarray, pd.DataFrame]:
+    """``(camera, keyframes, lags)`` of a file written by :func:`write_lags`."""
+    try:
+        doc = json.loads(Path(path).read_text())
+        lags = pd.DataFrame(doc["lags"], columns=doc["columns"])
+        keys = np.asarray(doc["keyframes"], np.int64)
+        camera = str(doc["camera"])
+    except (OSError, ValueError, KeyError, TypeError) as err:
+        raise ValueError(f"{path}: not a codec-lag file ({err})") from None
+    if list(lags.columns) != list(LAG_COLUMNS):
+        raise ValueError(f"{path}: columns {list(lags.columns)}, expected {list(LAG_COLUMNS)}")
+    return camera, keys, lags.astype({"keyframe": np.int64, "side": np.int64, "dots": np.int64})
+
+
+def corrected_tracks(
+    tracks: pd.DataFrame, lags: Mapping[str, tuple[np.ndarray, pd.DataFrame]]
+) -> pd.DataFrame:
+    """A copy of ``tracks`` (``TRACKS`` rows of any cameras, e.g. one chunk's) with each camera's
+    P frames corrected by :func:`correct_lag` from its ``(keyframes, lags)`` in ``lags`` (every
+    keyframe of the test, so a GOP cut by the chunk is corrected from both its ends); cameras
+    not in ``lags`` are left as they are."""
+    parts = []
+    for camera, own in tracks.groupby("camera", sort=False):
+        parts.append(correct_lag(own, *lags[camera]) if camera in lags else own.copy())
+    if not parts:
+        return tracks.copy()
+    return pd.concat(parts).loc[tracks.index]

@@ -512,6 +512,25 @@ def get_all_tracks(wildcards):
     return _chunk_files(wildcards, "results/{test}/track/{camera}/{chunk}.parquet")
 
 
+def get_camera_tracks(wildcards):
+    """One camera's tracks through every chunk, in frame order."""
+    return expand(
+        "results/{test}/track/{camera}/{chunk}.parquet",
+        test=wildcards.test,
+        camera=wildcards.camera,
+        chunk=get_chunks(wildcards.test),
+    )
+
+
+def get_codec_lags(wildcards):
+    """Every camera's departures of its P frames from its keyframes (rule measure_codec_lag)."""
+    return expand(
+        "results/{test}/codec_lag/{camera}.json",
+        test=wildcards.test,
+        camera=get_cameras(wildcards.test),
+    )
+
+
 def get_all_handovers(wildcards):
     """The targets every camera's chunk carried to the next chunk's first frame."""
     return _chunk_files(

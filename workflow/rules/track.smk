@@ -31,11 +31,38 @@ rule track_targets:
         "../scripts/track_targets.py"
 
 
+rule measure_codec_lag:
+    """Measure how one camera's P frames depart from its keyframes, at every keyframe of the
+    test from the tracks on both sides of it (whichever chunks they are in)."""
+    input:
+        tracks=get_camera_tracks,
+        video=get_camera_video,
+        frames="results/{test}/frames/{camera}.parquet",
+    output:
+        lags="results/{test}/codec_lag/{camera}.json",
+    log:
+        "logs/{test}/measure_codec_lag/{camera}.log",
+    benchmark:
+        "benchmarks/{test}/measure_codec_lag/{camera}.tsv"
+    conda:
+        "../envs/triaxtrack.yaml"
+    threads: 1
+    resources:
+        mem_mb=2000,
+        runtime=20,
+    params:
+        tracking=config["tracking"],
+    script:
+        "../scripts/measure_codec_lag.py"
+
+
 rule triangulate_chunk:
     """Triangulate every tracked target in the water at every processed frame of one chunk
-    (cameras and cell of the first frame), and check that no camera moved."""
+    (cameras and cell of the first frame; P frames corrected by each camera's codec lag), and
+    check that no camera moved."""
     input:
         tracks=get_chunk_tracks,
+        lags=get_codec_lags,
         cameras="results/{test}/cameras.json",
         reference="results/{test}/reconstruction/quality.json",
         points="results/{test}/reconstruction/points.parquet",

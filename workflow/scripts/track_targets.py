@@ -4,9 +4,8 @@ import time
 
 import yaml
 
-from triaxtrack.codec_lag import lag_corrected
 from triaxtrack.completion import dot_grid
-from triaxtrack.frames import ProcessedTestFrames, iter_test_frames, keyframe_test_frames
+from triaxtrack.frames import ProcessedTestFrames, iter_test_frames
 from triaxtrack.kit import load_kit_design
 from triaxtrack.logs import log_to
 from triaxtrack.tables import FRAME_MAP, LABELS, TRACKS, read_table, write_table
@@ -34,13 +33,6 @@ seconds = time.perf_counter() - t0
 mode = f"fast mode: {frames.decoded} frames decoded ({frames.seeks} seeks)" if fast else "every frame decoded"
 print(f"{camera}: {mode} for {len(plan.report)} reported of frames {plan.first}..{plan.end - 1}: "
       f"decoding and tracking {seconds:.2f} s")  # fmt: skip
-if snakemake.params.tracking["codec_lag"] and fast:
-    print(f"{camera}: codec lag not corrected: fast mode decodes no P frames around the keyframes")
-elif snakemake.params.tracking["codec_lag"]:
-    keys = keyframe_test_frames(snakemake.input.video, fmap, plan.first, plan.end)
-    tracks, lags = lag_corrected(tracks, keys)
-    print(f"{camera}: P frames against keyframes {keys.tolist()} (triaxtrack.codec_lag):")
-    print(lags.to_string(index=False) if len(lags) else "  not measured (no keyframe with enough P frames)")
 shared = tracks["frame"] == plan.handover
 write_table(tracks[~shared], snakemake.output.tracks, TRACKS)
 write_table(tracks[shared], snakemake.output.handover, TRACKS)
