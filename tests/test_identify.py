@@ -7,10 +7,10 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from triaxtrack.coded_targets import decode_coded_targets
 from triaxtrack.codes import bits_of
 from triaxtrack.detect import (
     DetectParams,
-    decode_coded_targets,
     detect_blobs,
     gap_background_centroids,
     merged_pair_centroids,

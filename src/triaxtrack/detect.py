@@ -18,14 +18,7 @@ says ``undist`` (ideal pinhole pixels of the same camera matrix, see :func:`undi
   blob's moments, ``roundness = minor / major`` (1 for a circle seen head-on; a dot seen at an
   angle ``a`` off its normal has ``cos a``), ``fill = area / (pi major minor / 4)`` (about 1 for a
   filled ellipse, lower for rings, arcs and merged blobs).
-* A CT is a round blob (its centre dot) around which the kit's design is read: a white gap, the
-  ring of ``sectors`` code sectors, a white surround. The centre dot's moment ellipse gives the
-  local affine map from the printed target to the image, so the ring is read where the design
-  puts it, at any roll and obliquity. Each sector's mean grey level must lie clearly on one side
-  of the mid-level (``ct_min_confidence``); the code must match a kit code exactly (by default;
-  ``ct_max_corrected = 1`` also accepts a difference in the one sector read least confidently:
-  a target partly hidden by a longitudinal band can read as a neighbour of another code).
-  Anything else is rejected, never guessed.
+* Coded targets (CTs) are decoded around their centre dots by :mod:`triaxtrack.coded_targets`.
 """
 
 from __future__ import annotations
@@ -36,15 +29,7 @@ import cv2
 import numpy as np
 import pandas as pd
 
-from triaxtrack.codes import rotations
 from triaxtrack.image_quality import blur_sigma, noise_sigma
-
-# sampling of a CT, in units of the printed design (mm), relative to its centre
-CT_INNER_WHITE = 0.5  # fraction of the way from the centre dot's edge to the ring: the white gap
-CT_RING_RADII = (0.35, 0.5, 0.65)  # fractions across the code ring where sectors are read
-CT_OUTER_WHITE = 0.35  # fraction of the way from the ring's outer edge to the label edge
-CT_SAMPLES_PER_SECTOR = 8
-CT_CENTRE_FRACTION = 0.45  # centre-dot samples within this fraction of its radius
 
 
 @dataclass(frozen=True)
@@ -486,146 +471,3 @@ def ellipse_maps(blobs: pd.DataFrame) -> np.ndarray:
     vals, vecs = np.linalg.eigh(cov)
     root = 2 * np.sqrt(np.maximum(vals, 1e-12))
     return np.einsum("nij,nj,nkj->nik", vecs, root, vecs)
-
-
-@dataclass(frozen=True)
-class CodeBook:
-    """All rotations of the kit's CT codes, for vectorised nearest-code search."""
-
-    ids: np.ndarray  # (K,) CT id of each rotated word
-    words: np.ndarray  # (K,) rotated code words
-    sectors: int
-
-    @staticmethod
-    def from_codes(codes: dict[int, int], sectors: int) -> CodeBook:
-        ids, words = [], []
-        for tid, word in sorted(codes.items()):
-            for r in rotations(word, sectors):
-                ids.append(tid)
-                words.append(r)
-        return CodeBook(np.array(ids, np.int64), np.array(words, np.int64), sectors)
-
-    def nearest(self, word: int) -> tuple[int, int, int, int]:
-        """(id, distance, rotated word matched, distance to the nearest *other* id)."""
-        x = np.bitwise_xor(self.words, np.int64(word))
-        d = np.bitwise_count(x)
-        i = int(np.argmin(d))
-        best_id = int(self.ids[i])
-        other = d[self.ids != best_id]
-        return best_id, int(d[i]), int(self.words[i]), int(other.min()) if len(other) else 99
-
-
-def _ct_geometry(ct: dict) -> dict[str, float]:
-    """Sampling radii of a CT in units of its centre-dot radius."""
-    rc, r0, r1 = ct["centre_radius"], ct["ring_inner_radius"], ct["ring_outer_radius"]
-    label = ct.get("label_radius", r1 + 1.2)
-    return {
-        "inner": (rc + CT_INNER_WHITE * (r0 - rc)) / rc,
-        "ring": tuple((r0 + f * (r1 - r0)) / rc for f in CT_RING_RADII),
-        "outer": (r1 + CT_OUTER_WHITE * (label - r1)) / rc,
-        "extent": label / rc,
-    }
-
-
-def decode_coded_targets(
-    gray: np.ndarray, blobs: pd.DataFrame, codes: dict[int, int], ct: dict, params: DetectParams | None = None
-) -> pd.DataFrame:
-    """Read the ring code around every candidate centre dot; keep the confident, unique ones.
-
-    ``codes``: CT id -> code word (bit k = sector k, :func:`triaxtrack.kit.ct_codes`); ``ct``: the
-    kit's ``coded_target`` design. Returns one row per accepted CT: ``id``, ``blob`` (row index in
-    ``blobs``), ``u_px``, ``v_px`` (the centre dot's centroid), ``confidence`` (0-1: the weakest
-    sector's distance from the mid-level, relative to half the contrast), ``distance`` (sectors
-    corrected, 0 or 1), ``white``, ``black`` (grey levels), ``extent_px`` (the label's radius
-    along the major axis). IDs read more than once in the frame are all dropped.
-    """
-    p = params or DetectParams()
-    n = int(ct["sectors"])
-    geo = _ct_geometry(ct)
-    cand = np.nonzero(
-        (blobs.area_px.to_numpy() >= p.ct_min_area_px)
-        & (blobs.roundness.to_numpy() >= p.ct_min_roundness)
-        & (blobs.fill.to_numpy() >= p.min_fill)
-        & (blobs.fill.to_numpy() <= p.max_fill)
-    )[0]
-    cols = ["id", "blob", "u_px", "v_px", "confidence", "distance", "white", "black", "extent_px"]
-    if len(cand) == 0:
-        return pd.DataFrame(columns=cols)
-    sub = blobs.iloc[cand]
-    maps = ellipse_maps(sub)  # unit circle -> centre dot ellipse
-    centre = sub[["u_px", "v_px"]].to_numpy()
-    ns = n * CT_SAMPLES_PER_SECTOR
-    phi = 2 * np.pi * (np.arange(ns) + 0.5) / ns
-    # counter-clockwise as seen from outside the surface = counter-clockwise on screen (v down)
-    circle = np.stack([np.cos(phi), -np.sin(phi)], axis=1)
-    radii = [0.0, CT_CENTRE_FRACTION * 0.5, CT_CENTRE_FRACTION, geo["inner"], *geo["ring"], geo["outer"]]
-    pts = centre[:, None, None, :] + np.einsum(
-        "nij,rsj->nrsi", maps, np.asarray(radii)[:, None, None] * circle[None, :, :]
-    )
-    g = np.asarray(gray, np.float32)
-    mx = pts[..., 0].reshape(len(cand), -1).astype(np.float32)
-    my = pts[..., 1].reshape(len(cand), -1).astype(np.float32)
-    vals = cv2.remap(g, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=-1.0)
-    vals = vals.reshape(len(cand), len(radii), ns)
-    inside = (vals >= 0).all(axis=(1, 2))
-    black = np.median(vals[:, :3].reshape(len(cand), -1), axis=1)
-    white = np.median(vals[:, 3], axis=1)
-    span = np.maximum(white - black, 1e-6)
-    norm = (vals - black[:, None, None]) / span[:, None, None]
-    ok = inside & (white - black >= p.min_contrast)
-    ok &= norm[:, 3].min(axis=1) >= p.ct_min_white
-    ok &= (norm[:, -1] >= p.ct_min_white).mean(axis=1) >= p.ct_outer_white_fraction
-    rings = norm[:, 4:-1]  # (N, radii, ns)
-    # sector means over the central half of each sector, for each sub-sector phase
-    k = CT_SAMPLES_PER_SECTOR
-    nr = rings.shape[1]
-    best_conf = np.full(len(cand), -1.0)
-    best_bits = np.zeros((len(cand), n), np.uint8)
-    sector_conf = np.zeros((len(cand), n))
-    for s in range(k):
-        rolled = np.roll(rings, -s, axis=2).reshape(len(cand), nr, n, k)
-        per_radius = rolled[..., k // 4 : k - k // 4].mean(axis=3)  # (N, radii, n)
-        means = per_radius.mean(axis=1)
-        bits = means < 0.5
-        # a printed sector is dark or light across the whole ring width
-        consistent = ((per_radius < 0.5) == bits[:, None, :]).all(axis=(1, 2))
-        conf = np.where(consistent, (2 * np.abs(means - 0.5)).min(axis=1), -1.0)
-        better = conf > best_conf
-        best_conf[better] = conf[better]
-        best_bits[better] = bits[better].astype(np.uint8)
-        sector_conf[better] = 2 * np.abs(means[better] - 0.5)
-    ok &= best_conf >= p.ct_min_confidence
-    book = CodeBook.from_codes(codes, n)
-    rows = []
-    for i in np.nonzero(ok)[0]:
-        word = int(sum(int(b) << j for j, b in enumerate(best_bits[i])))
-        tid, dist, matched, other = book.nearest(word)
-        if dist > p.ct_max_corrected or other <= dist + 1:
-            continue
-        if dist == 1:
-            flipped = int(np.log2(word ^ matched))
-            if flipped != int(np.argmin(sector_conf[i])):
-                continue
-        rows.append(dict(
-            id=tid, blob=int(sub.index[i]), u_px=centre[i, 0], v_px=centre[i, 1],
-            confidence=float(best_conf[i]), distance=dist, white=float(white[i]),
-            black=float(black[i]), extent_px=float(np.linalg.norm(maps[i], 2) * geo["extent"]),
-        ))  # fmt: skip
-    out = pd.DataFrame(rows, columns=cols)
-    dup = out.id.duplicated(keep=False)
-    out = out[~dup].sort_values("confidence", ascending=False)
-    # a CT's label holds nothing else: drop candidates inside a more confident CT (code pieces)
-    centres = out[["u_px", "v_px"]].to_numpy()
-    pos = {b: i for i, b in enumerate(sub.index)}
-    keep = []
-    for a in range(len(out)):
-        ma = maps[pos[out.blob.iloc[a]]]
-        inside = [
-            np.linalg.norm(np.linalg.solve(ma, centres[b] - centres[a])) < geo["extent"]
-            or np.linalg.norm(np.linalg.solve(maps[pos[out.blob.iloc[b]]], centres[a] - centres[b]))
-            < geo["extent"]
-            for b in keep
-        ]
-        if not any(inside):
-            keep.append(a)
-    return out.iloc[keep].sort_values("id").reset_index(drop=True)

@@ -68,7 +68,7 @@ def identify(
     """Label one frame's detections (see the module docstring).
 
     ``blobs``/``cts``: from :func:`triaxtrack.detect.detect_blobs` and
-    :func:`~triaxtrack.detect.decode_coded_targets`; ``dots``: the blobs that pass the dot
+    :func:`~triaxtrack.coded_targets.decode_coded_targets`; ``dots``: the blobs that pass the dot
     criteria (:func:`~triaxtrack.detect.dot_mask`); ``undistort``: (N, 2) distorted pixels ->
     undistorted pixels; ``gray``: the frame, if given, re-centres the longitudinal stripes' dots
     beside a dark edge (:func:`~triaxtrack.detect.gap_background_centroids`) and fits membrane
@@ -214,7 +214,8 @@ def label_frame(gray: np.ndarray, camera, design: dict, codes: dict[int, int], d
                 identify_params: IdentifyParams | None = None) -> pd.DataFrame:  # fmt: skip
     """Detect and identify every target in one grey frame of a calibrated ``camera``
     (:class:`triaxtrack.optics.Camera`, intrinsics used). Columns ``LABEL_COLUMNS``."""
-    from triaxtrack.detect import decode_coded_targets, detect_blobs, dot_mask
+    from triaxtrack.coded_targets import decode_coded_targets
+    from triaxtrack.detect import detect_blobs, dot_mask
 
     blobs = detect_blobs(gray, detect_params)
     cts = decode_coded_targets(gray, blobs, codes, design["coded_target"], detect_params)
