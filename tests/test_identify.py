@@ -91,6 +91,30 @@ def test_misprinted_sectors_are_never_misread(kit):
             assert set(cts.id) <= {tid}
 
 
+@pytest.mark.parametrize("roll", [0.0, 75.0, 200.0])
+def test_a_ct_cut_by_the_image_border_is_read_from_the_sectors_inside(kit, roll):
+    """A CT whose ring runs out of the image is read from the sectors inside it (its centre dot
+    and white gap inside): the right ID, with fewer sectors, when no other code agrees with the
+    sectors read (which depends on the code and the roll: at 75 degrees three of these four);
+    cut to under CT_MIN_KNOWN_FRACTION of them, it is not read at all. Never misread."""
+    design, _, codes = kit
+    ct = design["coded_target"]
+    n = ct["sectors"]
+    read = 0
+    for tid in (7, 23, 117, 152):
+        img = _ct_image(codes[tid], ct, roll_deg=roll)
+        cut = np.ascontiguousarray(img[:, :84])  # the ring's right part out of the picture
+        cts = decode_coded_targets(cut, detect_blobs(cut, CARD), codes, ct)
+        assert set(cts.id) <= {tid}
+        if len(cts):
+            read += 1
+            assert 0.6 * n <= cts.sectors[0] < n
+            assert np.hypot(cts.u_px[0] - 60, cts.v_px[0] - 60) < 0.05
+        half = np.ascontiguousarray(img[:, :72])  # more of the ring out than in
+        assert decode_coded_targets(half, detect_blobs(half, CARD), codes, ct).empty
+    assert read >= (3 if roll == 75.0 else 0)
+
+
 def test_chain_never_skips_a_missing_dot():
     """A stripe walk stops at a gap: the dots beyond it are not given shifted IDs."""
     x = np.arange(12, dtype=float) * 10.0
@@ -198,6 +222,16 @@ def test_a_stripes_cts_far_from_its_run_are_dropped(kit):
     # two equally large runs of one stripe: neither is trusted
     two = pd.concat([cts.iloc[:5], cts.iloc[:5].assign(id=cts.id.iloc[:5] + 8, v_px=600.0)])
     assert not _plausible_cts(two, design).id.isin(cts.id.iloc[:5]).any()
+    # ... unless they lie on one arc, the image of the stripe's circle: the band's two ends,
+    # its middle cut by the image border
+    u = np.array([100.0, 140.0, 180.0, 560.0, 600.0, 640.0])
+    ends = pd.DataFrame({"id": cell + np.array([0, 1, 2, 9, 10, 11]), "u_px": u,
+                         "v_px": 500.0 + 2e-4 * (u - 370.0) ** 2, "extent_px": 15.0})  # fmt: skip
+    assert sorted(_plausible_cts(ends, design).id) == sorted(ends.id)
+    # not at one height (another band), or not in ID order across the image: neither trusted
+    assert _plausible_cts(ends.assign(v_px=ends.v_px + np.r_[0, 0, 0, 40, 40, 40]), design).empty
+    swapped = ends.assign(u_px=np.r_[560.0, 600.0, 640.0, 100.0, 140.0, 180.0])
+    assert _plausible_cts(swapped, design).empty
 
 
 @pytest.mark.parametrize(("rows_below", "spacing"), [(0, 1), (8, 1), (0, 4)])

@@ -30,6 +30,9 @@ CT_RING_RADII = (0.35, 0.5, 0.65)  # fractions across the code ring where sector
 CT_OUTER_WHITE = 0.35  # fraction of the way from the ring's outer edge to the label edge
 CT_SAMPLES_PER_SECTOR = 8
 CT_CENTRE_FRACTION = 0.45  # centre-dot samples within this fraction of its radius
+# A CT cut by the image border is read from the sectors inside the image: at least this share of
+# them, matched exactly (no corrected sector) and 2 or more sectors from every other code there
+CT_MIN_KNOWN_FRACTION = 0.6
 
 
 @dataclass(frozen=True)
@@ -49,9 +52,12 @@ class CodeBook:
                 words.append(r)
         return CodeBook(np.array(ids, np.int64), np.array(words, np.int64), sectors)
 
-    def nearest(self, word: int) -> tuple[int, int, int, int]:
-        """(id, distance, rotated word matched, distance to the nearest *other* id)."""
+    def nearest(self, word: int, known: int | None = None) -> tuple[int, int, int, int]:
+        """(id, distance, rotated word matched, distance to the nearest *other* id), counting
+        only the sectors whose bit is set in ``known`` (all when None)."""
         x = np.bitwise_xor(self.words, np.int64(word))
+        if known is not None:
+            x = np.bitwise_and(x, np.int64(known))
         d = np.bitwise_count(x)
         i = int(np.argmin(d))
         best_id = int(self.ids[i])
@@ -81,7 +87,12 @@ def decode_coded_targets(
     ``blobs``), ``u_px``, ``v_px`` (the centre dot's centroid), ``confidence`` (0-1: the weakest
     sector's distance from the mid-level, relative to half the contrast), ``distance`` (sectors
     corrected, 0 or 1), ``white``, ``black`` (grey levels), ``extent_px`` (the label's radius
-    along the major axis). IDs read more than once in the frame are all dropped.
+    along the major axis), ``sectors`` (how many were read: fewer than the design's for a CT cut
+    by the image border). IDs read more than once in the frame are all dropped.
+
+    A CT whose ring or surround runs out of the image is read from what is inside (its centre
+    dot and white gap must be): at least ``CT_MIN_KNOWN_FRACTION`` of its sectors, matched with
+    no correction, and only if every other code differs from the sectors read in two or more.
     """
     p = params or DetectParams()
     n = int(ct["sectors"])
@@ -92,7 +103,7 @@ def decode_coded_targets(
         & (blobs.fill.to_numpy() >= p.min_fill)
         & (blobs.fill.to_numpy() <= p.max_fill)
     )[0]
-    cols = ["id", "blob", "u_px", "v_px", "confidence", "distance", "white", "black", "extent_px"]
+    cols = ["id", "blob", "u_px", "v_px", "confidence", "distance", "white", "black", "extent_px", "sectors"]
     if len(cand) == 0:
         return pd.DataFrame(columns=cols)
     sub = blobs.iloc[cand]
@@ -111,40 +122,48 @@ def decode_coded_targets(
     my = pts[..., 1].reshape(len(cand), -1).astype(np.float32)
     vals = cv2.remap(g, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=-1.0)
     vals = vals.reshape(len(cand), len(radii), ns)
-    inside = (vals >= 0).all(axis=(1, 2))
+    inside = vals >= 0  # samples outside the image read -1
     black = np.median(vals[:, :3].reshape(len(cand), -1), axis=1)
     white = np.median(vals[:, 3], axis=1)
     span = np.maximum(white - black, 1e-6)
-    norm = (vals - black[:, None, None]) / span[:, None, None]
-    ok = inside & (white - black >= p.min_contrast)
+    norm = np.where(inside, (vals - black[:, None, None]) / span[:, None, None], np.nan)
+    ok = inside[:, :4].all(axis=(1, 2)) & (white - black >= p.min_contrast)  # centre dot and gap
     ok &= norm[:, 3].min(axis=1) >= p.ct_min_white
-    ok &= (norm[:, -1] >= p.ct_min_white).mean(axis=1) >= p.ct_outer_white_fraction
-    rings = norm[:, 4:-1]  # (N, radii, ns)
+    surround = inside[:, -1].sum(axis=1)
+    ok &= (norm[:, -1] >= p.ct_min_white).sum(axis=1) >= p.ct_outer_white_fraction * np.maximum(surround, 1)
+    rings = norm[:, 4:-1]  # (N, radii, ns), NaN outside the image
     # sector means over the central half of each sector, for each sub-sector phase
     k = CT_SAMPLES_PER_SECTOR
     nr = rings.shape[1]
     best_conf = np.full(len(cand), -1.0)
     best_bits = np.zeros((len(cand), n), np.uint8)
+    best_known = np.zeros((len(cand), n), bool)
     sector_conf = np.zeros((len(cand), n))
     for s in range(k):
         rolled = np.roll(rings, -s, axis=2).reshape(len(cand), nr, n, k)
-        per_radius = rolled[..., k // 4 : k - k // 4].mean(axis=3)  # (N, radii, n)
-        means = per_radius.mean(axis=1)
-        bits = means < 0.5
+        per_radius = rolled[..., k // 4 : k - k // 4].mean(axis=3)  # (N, radii, n), NaN: not all inside
+        known = np.isfinite(per_radius).all(axis=1)  # (N, n)
+        means = np.where(known, per_radius.mean(axis=1), 0.5)
+        bits = known & (means < 0.5)
         # a printed sector is dark or light across the whole ring width
-        consistent = ((per_radius < 0.5) == bits[:, None, :]).all(axis=(1, 2))
-        conf = np.where(consistent, (2 * np.abs(means - 0.5)).min(axis=1), -1.0)
+        consistent = (((per_radius < 0.5) == bits[:, None, :]) | ~known[:, None, :]).all(axis=(1, 2))
+        enough = known.sum(axis=1) >= CT_MIN_KNOWN_FRACTION * n
+        weakest = np.where(known, 2 * np.abs(means - 0.5), np.inf).min(axis=1)
+        conf = np.where(consistent & enough, weakest, -1.0)
         better = conf > best_conf
         best_conf[better] = conf[better]
         best_bits[better] = bits[better].astype(np.uint8)
-        sector_conf[better] = 2 * np.abs(means[better] - 0.5)
+        best_known[better] = known[better]
+        sector_conf[better] = np.where(known[better], 2 * np.abs(means[better] - 0.5), np.inf)
     ok &= best_conf >= p.ct_min_confidence
     book = CodeBook.from_codes(codes, n)
     rows = []
     for i in np.nonzero(ok)[0]:
         word = int(sum(int(b) << j for j, b in enumerate(best_bits[i])))
-        tid, dist, matched, other = book.nearest(word)
-        if dist > p.ct_max_corrected or other <= dist + 1:
+        read = int(best_known[i].sum())
+        known = None if read == n else int(sum(1 << j for j in np.nonzero(best_known[i])[0]))
+        tid, dist, matched, other = book.nearest(word, known)
+        if dist > (p.ct_max_corrected if known is None else 0) or other <= dist + 1:
             continue
         if dist == 1:
             flipped = int(np.log2(word ^ matched))
@@ -153,7 +172,7 @@ def decode_coded_targets(
         rows.append(dict(
             id=tid, blob=int(sub.index[i]), u_px=centre[i, 0], v_px=centre[i, 1],
             confidence=float(best_conf[i]), distance=dist, white=float(white[i]),
-            black=float(black[i]), extent_px=float(np.linalg.norm(maps[i], 2) * geo["extent"]),
+            black=float(black[i]), extent_px=float(np.linalg.norm(maps[i], 2) * geo["extent"]), sectors=read,
         ))  # fmt: skip
     out = pd.DataFrame(rows, columns=cols)
     dup = out.id.duplicated(keep=False)

@@ -66,7 +66,8 @@ def _plausible_cts(cts: pd.DataFrame, design: dict) -> pd.DataFrame:
     image form one run (:data:`RUN_MAX_STEPS`, :data:`RUN_RADII_PER_STEP`): CTs outside the
     stripe's largest run are dropped, all of them when two runs are equally large (on a 720p
     test two cell-wall CTs beside a stripe's end read as pedestal CTs 1 and 2, each other's
-    support)."""
+    support), unless all the stripe's runs lie on one arc, the image of the stripe's circle
+    (:func:`_on_one_ring`: a band whose middle is cut by the image border)."""
     if len(cts) < 3:
         return cts
     stripes = _ct_stripes(design)
@@ -103,9 +104,31 @@ def _in_main_run(ids: np.ndarray, uv: np.ndarray, extent: np.ndarray, stripes: d
         sel = np.nonzero(names == name)[0]
         largest = size[sel].max()
         runs = np.unique(run[sel][size[sel] == largest])
-        if len(runs) == 1:
+        if len(np.unique(run[sel])) > 1 and _on_one_ring(ids[sel], uv[sel], extent[sel], int(count[sel][0])):
+            out[sel] = True  # several runs on one stripe's ring: its middle cut off or hidden
+        elif len(runs) == 1:
             out[sel] = run[sel] == runs[0]
     return out
+
+
+# A stripe's CTs lie on the image of one horizontal circle of the cell, in ID order along it: seen
+# in two or more runs (the band's middle cut by the image border), they are taken as one stripe's
+# when they span at most this many label radii in height (a CT of another stripe is 15 mm or
+# more higher or lower: 2 or more label radii) and their IDs run one way across the image
+RING_MAX_HEIGHT_RADII = 2.0
+RING_MIN_CTS = 4  # fewer say too little
+
+
+def _on_one_ring(ids: np.ndarray, uv: np.ndarray, extent: np.ndarray, count: int) -> bool:
+    """Do one stripe's CTs (``ids`` of a stripe of ``count``, image centres ``uv`` and label
+    radii ``extent``, pixels), seen in two or more runs, lie along one band in ID order? Then
+    the runs are pieces of one stripe whose middle is cut by the image border or hidden, not
+    misreads."""
+    if len(ids) < RING_MIN_CTS or np.ptp(uv[:, 1]) > RING_MAX_HEIGHT_RADII * float(np.median(extent)):
+        return False
+    order = np.argsort(uv[:, 0])
+    steps = np.diff(ids[order]) % count  # cyclic steps from left to right
+    return bool((steps < count / 2).all() or (steps > count / 2).all())
 
 
 def _theta_dir(ct_id: int, first: int, count: int, centres: dict) -> np.ndarray | None:
