@@ -164,3 +164,17 @@ def test_a_bad_lag_file_names_itself(tmp_path):
     path.write_text("{}")
     with pytest.raises(ValueError, match="cam01.json: not a codec-lag file"):
         read_lags(path)
+
+
+def test_corrected_tracks_of_several_cameras_keep_their_rows():
+    """Two cameras' tracks with the same index labels (joined without resetting it), one with a
+    lag file, one without: every row stays where it was, only the first camera's P frames move."""
+    tracks, _ = _tracks(lag=0.03, noise=0.01)
+    both = pd.concat([tracks, tracks.assign(camera="cam02")])  # duplicate index labels
+    lags = estimate_lag(tracks, KEYS)
+    fixed = corrected_tracks(both, {"cam01": (KEYS, lags)})
+    assert len(fixed) == len(both) and fixed.index.equals(both.index)
+    n = len(tracks)
+    expected, _ = lag_corrected(tracks, KEYS)
+    np.testing.assert_allclose(fixed.iloc[:n][["u_px", "v_px"]], expected[["u_px", "v_px"]])
+    pd.testing.assert_frame_equal(fixed.iloc[n:], both.iloc[n:])

@@ -94,25 +94,29 @@ def test_misprinted_sectors_are_never_misread(kit):
 @pytest.mark.parametrize("roll", [0.0, 75.0, 200.0])
 def test_a_ct_cut_by_the_image_border_is_read_from_the_sectors_inside(kit, roll):
     """A CT whose ring runs out of the image is read from the sectors inside it (its centre dot
-    and white gap inside): the right ID, with fewer sectors, when no other code agrees with the
-    sectors read (which depends on the code and the roll: at 75 degrees three of these four);
-    cut to under CT_MIN_KNOWN_FRACTION of them, it is not read at all. Never misread."""
+    and white gap inside): the right ID, with fewer sectors, when every other code differs from
+    the sectors read in CT_PARTIAL_MARGIN or more (it depends on the code and the roll: at 75
+    degrees, one sector out, codes 7, 30 and 160); cut to under CT_MIN_KNOWN_FRACTION of them,
+    it is not read at all. Never misread, also with two sectors misprinted."""
     design, _, codes = kit
     ct = design["coded_target"]
     n = ct["sectors"]
-    read = 0
-    for tid in (7, 23, 117, 152):
+    read = set()
+    for tid in (7, 23, 30, 117, 152, 160):
         img = _ct_image(codes[tid], ct, roll_deg=roll)
-        cut = np.ascontiguousarray(img[:, :84])  # the ring's right part out of the picture
+        cut = np.ascontiguousarray(img[:, :90])  # the ring's right edge out of the picture
         cts = decode_coded_targets(cut, detect_blobs(cut, CARD), codes, ct)
         assert set(cts.id) <= {tid}
         if len(cts):
-            read += 1
+            read.add(tid)
             assert 0.6 * n <= cts.sectors[0] < n
             assert np.hypot(cts.u_px[0] - 60, cts.v_px[0] - 60) < 0.05
         half = np.ascontiguousarray(img[:, :72])  # more of the ring out than in
         assert decode_coded_targets(half, detect_blobs(half, CARD), codes, ct).empty
-    assert read >= (3 if roll == 75.0 else 0)
+        for flip in ((0, 5), (2, 9), (4, 13), (8, 16)):
+            bad = np.ascontiguousarray(_ct_image(codes[tid], ct, flip=flip, roll_deg=roll)[:, :86])
+            assert set(decode_coded_targets(bad, detect_blobs(bad, CARD), codes, ct).id) <= {tid}
+    assert read >= ({7, 30, 160} if roll == 75.0 else set())
 
 
 def test_chain_never_skips_a_missing_dot():
@@ -222,16 +226,26 @@ def test_a_stripes_cts_far_from_its_run_are_dropped(kit):
     # two equally large runs of one stripe: neither is trusted
     two = pd.concat([cts.iloc[:5], cts.iloc[:5].assign(id=cts.id.iloc[:5] + 8, v_px=600.0)])
     assert not _plausible_cts(two, design).id.isin(cts.id.iloc[:5]).any()
-    # ... unless they lie on one arc, the image of the stripe's circle: the band's two ends,
-    # its middle cut by the image border
+    # ... unless the equal runs lie along one band in ID order with gaps that hold their missing
+    # CTs: the band's two ends, its middle cut off by the image border
     u = np.array([100.0, 140.0, 180.0, 560.0, 600.0, 640.0])
     ends = pd.DataFrame({"id": cell + np.array([0, 1, 2, 9, 10, 11]), "u_px": u,
                          "v_px": 500.0 + 2e-4 * (u - 370.0) ** 2, "extent_px": 15.0})  # fmt: skip
     assert sorted(_plausible_cts(ends, design).id) == sorted(ends.id)
-    # not at one height (another band), or not in ID order across the image: neither trusted
-    assert _plausible_cts(ends.assign(v_px=ends.v_px + np.r_[0, 0, 0, 40, 40, 40]), design).empty
-    swapped = ends.assign(u_px=np.r_[560.0, 600.0, 640.0, 100.0, 140.0, 180.0])
-    assert _plausible_cts(swapped, design).empty
+    flipped = ends.iloc[::-1].assign(u_px=u)  # IDs running right to left
+    assert sorted(_plausible_cts(flipped, design).id) == sorted(ends.id)
+    # not at one height (another band), not in ID order, a gap too narrow for its missing CTs,
+    # or more than half a turn: neither run trusted
+    for bad in (
+        ends.assign(v_px=ends.v_px + np.r_[0, 0, 0, 40, 40, 40]),
+        ends.assign(u_px=np.r_[560.0, 600.0, 640.0, 100.0, 140.0, 180.0]),
+        ends.assign(u_px=np.r_[100.0, 140.0, 180.0, 200.0, 240.0, 280.0]),
+        ends.assign(id=cell + np.array([0, 1, 2, 17, 18, 19])),
+    ):
+        assert _plausible_cts(bad, design).empty
+    # a misread pair beside a larger run: the larger run alone is kept, as before
+    pair = ends.iloc[[0, 1, 2, 4, 5]]
+    assert sorted(_plausible_cts(pair, design).id) == sorted(ends.id.iloc[:3])
 
 
 @pytest.mark.parametrize(("rows_below", "spacing"), [(0, 1), (8, 1), (0, 4)])

@@ -31,8 +31,8 @@ carries no weight, so a static test gives no correction.
 Each P frame's membrane dots are then moved forward by ``lag x'`` (``x'`` the dot's velocity
 from its own centroids, pixels per frame) and by the field, the coefficients interpolated
 linearly in time across the GOP, from those measured just after its keyframe to those measured just
-before the next (a GOP cut by the chunk's start or end takes its missing end from the chunk's
-neighbouring GOP). What is left: a departure that grows within the
+before the next (frames before the first keyframe given, or after the last, take the missing end
+from the neighbouring GOP). What is left: a departure that grows within the
 last few frames of a GOP (x264's rate control spends fewer bits on frames no later frame
 refers to) is measured only as its mean over the ``SIDE_FRAMES`` before the keyframe.
 Keyframes, and the other targets (cell wall, pedestal CTs), are left as they are.
@@ -184,8 +184,9 @@ def estimate_lag_chunks(chunks: Iterable[pd.DataFrame], keyframes: np.ndarray) -
     """:func:`estimate_lag` over one camera's chunks of tracks, given in frame order (each
     chunk's ``TRACKS`` without its handover frame), at every keyframe of the test: the frames on
     both sides of a keyframe are used whichever chunks they are in, so every GOP is measured
-    at both ends whatever the chunk size. Holds only the frames still needed (those of the last
-    ``SIDE_FRAMES + FAR_FRAMES`` frames and of the keyframes not yet measured)."""
+    at both ends whatever the chunk size. Holds the current chunk and, of the earlier ones, only
+    the frames still needed (the last ``SIDE_FRAMES + FAR_FRAMES`` frames, and those of the
+    keyframes not yet measured)."""
     keys = np.unique(np.asarray(keyframes, np.int64))
     reach = SIDE_FRAMES + FAR_FRAMES
     held = pd.DataFrame()
@@ -226,11 +227,12 @@ def estimate_lag_chunks(chunks: Iterable[pd.DataFrame], keyframes: np.ndarray) -
 def _coefficients(frames: np.ndarray, keyframes: np.ndarray, lags: pd.DataFrame) -> np.ndarray:
     """(F, 7) lag and field coefficients of each of ``frames``: 0 at keyframes; in a P frame
     interpolated linearly in time across its GOP, from the departure measured just after the
-    GOP's keyframe to that measured just before the next keyframe. A GOP cut by the chunk's
-    start or end (one of its keyframes not in ``keyframes``) takes the missing end from the
-    neighbouring GOP of the chunk (a recorder's GOPs are alike: the departure after the next
-    keyframe, or before the previous one) and its length from the chunk's keyframe spacing;
-    with one keyframe only, the side measured is held. NaN where nothing is measured. A lag
+    GOP's keyframe to that measured just before the next keyframe. A GOP with one of its
+    keyframes not in ``keyframes`` (before the first given, or after the last: the workflow
+    gives every keyframe of the test) takes the missing end from the neighbouring GOP (a
+    recorder's GOPs are alike: the departure after the next keyframe, or before the previous
+    one) and its length from the keyframe spacing; with one keyframe only, the side measured
+    is held. NaN where nothing is measured. A lag
     within ``SIGNIFICANT_SIGMAS`` standard errors of zero counts as 0."""
     frames = np.asarray(frames, np.int64)
     keys = np.sort(np.asarray(keyframes, np.int64))
@@ -355,6 +357,12 @@ def read_lags(path: str | Path) -> tuple[str, np.ndarray, pd.DataFrame]:
     return camera, keys, lags.astype({"keyframe": np.int64, "side": np.int64, "dots": np.int64})
 
 
+def read_lag_files(paths: Iterable[str | Path]) -> dict[str, tuple[np.ndarray, pd.DataFrame]]:
+    """Camera -> ``(keyframes, lags)`` of several files written by :func:`write_lags` (the
+    argument of :func:`corrected_tracks`)."""
+    return {camera: (keys, lags) for camera, keys, lags in map(read_lags, paths)}
+
+
 def corrected_tracks(
     tracks: pd.DataFrame, lags: Mapping[str, tuple[np.ndarray, pd.DataFrame]]
 ) -> pd.DataFrame:
@@ -362,9 +370,9 @@ def corrected_tracks(
     P frames corrected by :func:`correct_lag` from its ``(keyframes, lags)`` in ``lags`` (every
     keyframe of the test, so a GOP cut by the chunk is corrected from both its ends); cameras
     not in ``lags`` are left as they are."""
-    parts = []
-    for camera, own in tracks.groupby("camera", sort=False):
-        parts.append(correct_lag(own, *lags[camera]) if camera in lags else own.copy())
-    if not parts:
-        return tracks.copy()
-    return pd.concat(parts).loc[tracks.index]
+    out = tracks.copy()
+    for camera, pos in tracks.groupby("camera", sort=False).indices.items():
+        if camera in lags:
+            fixed = correct_lag(tracks.iloc[pos], *lags[camera])
+            out.iloc[pos, out.columns.get_indexer(["u_px", "v_px"])] = fixed[["u_px", "v_px"]].to_numpy()
+    return out

@@ -31,8 +31,11 @@ CT_OUTER_WHITE = 0.35  # fraction of the way from the ring's outer edge to the l
 CT_SAMPLES_PER_SECTOR = 8
 CT_CENTRE_FRACTION = 0.45  # centre-dot samples within this fraction of its radius
 # A CT cut by the image border is read from the sectors inside the image: at least this share of
-# them, matched exactly (no corrected sector) and 2 or more sectors from every other code there
+# them, matched exactly (no corrected sector), and CT_PARTIAL_MARGIN or more sectors from every
+# other code there: as for a whole CT (the kit's codes differ in 3), two misread sectors never
+# give another ID
 CT_MIN_KNOWN_FRACTION = 0.6
+CT_PARTIAL_MARGIN = 3
 
 
 @dataclass(frozen=True)
@@ -92,7 +95,9 @@ def decode_coded_targets(
 
     A CT whose ring or surround runs out of the image is read from what is inside (its centre
     dot and white gap must be): at least ``CT_MIN_KNOWN_FRACTION`` of its sectors, matched with
-    no correction, and only if every other code differs from the sectors read in two or more.
+    no correction, and only if every other code differs from the sectors read in
+    ``CT_PARTIAL_MARGIN`` or more (so two misread sectors never give another ID, as for a whole
+    CT).
     """
     p = params or DetectParams()
     n = int(ct["sectors"])
@@ -122,7 +127,8 @@ def decode_coded_targets(
     my = pts[..., 1].reshape(len(cand), -1).astype(np.float32)
     vals = cv2.remap(g, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=-1.0)
     vals = vals.reshape(len(cand), len(radii), ns)
-    inside = vals >= 0  # samples outside the image read -1
+    h, w = g.shape
+    inside = ((mx >= 0) & (mx <= w - 1) & (my >= 0) & (my <= h - 1)).reshape(vals.shape)
     black = np.median(vals[:, :3].reshape(len(cand), -1), axis=1)
     white = np.median(vals[:, 3], axis=1)
     span = np.maximum(white - black, 1e-6)
@@ -163,7 +169,9 @@ def decode_coded_targets(
         read = int(best_known[i].sum())
         known = None if read == n else int(sum(1 << j for j in np.nonzero(best_known[i])[0]))
         tid, dist, matched, other = book.nearest(word, known)
-        if dist > (p.ct_max_corrected if known is None else 0) or other <= dist + 1:
+        if known is None and (dist > p.ct_max_corrected or other <= dist + 1):
+            continue
+        if known is not None and (dist > 0 or other < CT_PARTIAL_MARGIN):
             continue
         if dist == 1:
             flipped = int(np.log2(word ^ matched))

@@ -523,7 +523,14 @@ def get_camera_tracks(wildcards):
 
 
 def get_codec_lags(wildcards):
-    """Every camera's departures of its P frames from its keyframes (rule measure_codec_lag)."""
+    """Every camera's departures of its P frames from its keyframes (rule measure_codec_lag);
+    none when the correction is off or in fast mode (no P frames decoded around keyframes).
+    """
+    tracking = config["tracking"]
+    if not tracking["codec_lag"] or (
+        tracking["step_s"] is not None and tracking["fast"]
+    ):
+        return []
     return expand(
         "results/{test}/codec_lag/{camera}.json",
         test=wildcards.test,

@@ -50,8 +50,6 @@ rule measure_codec_lag:
     resources:
         mem_mb=2000,
         runtime=20,
-    params:
-        tracking=config["tracking"],
     script:
         "../scripts/measure_codec_lag.py"
 
@@ -98,6 +96,7 @@ rule collect_timesteps:
         residuals=get_timestep_residuals,
         motion=get_timestep_motion,
         tracks=get_all_tracks,
+        lags=get_codec_lags,
         handovers=get_all_handovers,
         labels="results/{test}/labels.parquet",
         reference="results/{test}/reconstruction/quality.json",

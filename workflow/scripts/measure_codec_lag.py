@@ -8,18 +8,10 @@ from triaxtrack.tables import FRAME_MAP, TRACKS, read_table
 log_to(snakemake.log[0])
 
 camera = snakemake.wildcards.camera
-tracking = snakemake.params.tracking
 fmap = read_table(snakemake.input.frames, FRAME_MAP)
 keys = keyframe_test_frames(snakemake.input.video, fmap, 0, len(fmap))
-chunks = (read_table(path, TRACKS) for path in snakemake.input.tracks)
-fast = tracking["step_s"] is not None and tracking["fast"]
-if tracking["codec_lag"] and not fast:
-    lags = estimate_lag_chunks(chunks, keys)
-    note = "" if len(lags) else "not measured: no keyframe with enough P frames on either side"
-else:
-    lags = estimate_lag_chunks([], keys)
-    why = "fast mode decodes no P frames around the keyframes" if fast else "tracking.codec_lag is false"
-    note = f"not measured: {why}"
+lags = estimate_lag_chunks((read_table(path, TRACKS) for path in snakemake.input.tracks), keys)
+note = "" if len(lags) else "not measured: no keyframe with enough P frames on either side"
 write_lags(snakemake.output.lags, camera, keys, lags, note)
 print(f"{camera}: P frames against keyframes {keys.tolist()} (triaxtrack.codec_lag):")
 print(note or lags.to_string(index=False))

@@ -5,7 +5,7 @@ import json
 import numpy as np
 import yaml
 
-from triaxtrack.codec_lag import corrected_tracks, read_lags
+from triaxtrack.codec_lag import corrected_tracks, read_lag_files
 from triaxtrack.kit import load_kit_design, target_table
 from triaxtrack.logs import log_to
 from triaxtrack.optics import CellOptics, read_cameras
@@ -26,9 +26,8 @@ cell = CellOptics(
 table = target_table(load_kit_design(snakemake.input.kit))
 fps = float(yaml.safe_load(open(snakemake.input.test_yaml))["fps"])
 tracks = concat_tables(snakemake.input.tracks, TRACKS)
-if snakemake.params.tracking["codec_lag"]:
-    lags = {camera: (keys, table) for camera, keys, table in map(read_lags, snakemake.input.lags)}
-    tracks = corrected_tracks(tracks, lags)
+if snakemake.input.lags:  # P frames moved by each camera's codec lag (rule measure_codec_lag)
+    tracks = corrected_tracks(tracks, read_lag_files(snakemake.input.lags))
 reference = read_table(snakemake.input.points, POINTS)
 wall = reference[reference["id"].isin(table.loc[table["surface"] == "cell_outer", "id"])]
 moved_px = snakemake.params.tracking["moved_px"]

@@ -66,8 +66,8 @@ def _plausible_cts(cts: pd.DataFrame, design: dict) -> pd.DataFrame:
     image form one run (:data:`RUN_MAX_STEPS`, :data:`RUN_RADII_PER_STEP`): CTs outside the
     stripe's largest run are dropped, all of them when two runs are equally large (on a 720p
     test two cell-wall CTs beside a stripe's end read as pedestal CTs 1 and 2, each other's
-    support), unless all the stripe's runs lie on one arc, the image of the stripe's circle
-    (:func:`_on_one_ring`: a band whose middle is cut by the image border)."""
+    support), unless those equal runs lie along one band in ID order with gaps that hold their
+    missing CTs (:func:`_on_one_ring`: a band whose middle is cut off by the image border)."""
     if len(cts) < 3:
         return cts
     stripes = _ct_stripes(design)
@@ -104,31 +104,41 @@ def _in_main_run(ids: np.ndarray, uv: np.ndarray, extent: np.ndarray, stripes: d
         sel = np.nonzero(names == name)[0]
         largest = size[sel].max()
         runs = np.unique(run[sel][size[sel] == largest])
-        if len(np.unique(run[sel])) > 1 and _on_one_ring(ids[sel], uv[sel], extent[sel], int(count[sel][0])):
-            out[sel] = True  # several runs on one stripe's ring: its middle cut off or hidden
-        elif len(runs) == 1:
+        tied = sel[np.isin(run[sel], runs)]
+        if len(runs) == 1:
             out[sel] = run[sel] == runs[0]
+        elif largest >= 2 and _on_one_ring(ids[tied], uv[tied], extent[tied], int(count[sel][0]), run[tied]):
+            out[tied] = True  # equal runs along one band: its middle cut off or hidden
     return out
 
 
-# A stripe's CTs lie on the image of one horizontal circle of the cell, in ID order along it: seen
-# in two or more runs (the band's middle cut by the image border), they are taken as one stripe's
-# when they span at most this many label radii in height (a CT of another stripe is 15 mm or
-# more higher or lower: 2 or more label radii) and their IDs run one way across the image
-RING_MAX_HEIGHT_RADII = 2.0
-RING_MIN_CTS = 4  # fewer say too little
+# Equally large runs of one stripe are taken as pieces of one band whose middle is cut off by the
+# image border (or hidden) when they lie at one height, within this many label radii (a CT of
+# another stripe is 15 mm, over two label radii, higher or lower), their IDs run one way across
+# the image over less than half a turn, and the gaps between them hold their missing CTs: per ID
+# step, RING_GAP_RANGE times the runs' own spacing (wider where the band faces the camera)
+RING_MAX_HEIGHT_RADII = 1.5
+RING_GAP_RANGE = (0.5, 3.0)
 
 
-def _on_one_ring(ids: np.ndarray, uv: np.ndarray, extent: np.ndarray, count: int) -> bool:
-    """Do one stripe's CTs (``ids`` of a stripe of ``count``, image centres ``uv`` and label
-    radii ``extent``, pixels), seen in two or more runs, lie along one band in ID order? Then
-    the runs are pieces of one stripe whose middle is cut by the image border or hidden, not
-    misreads."""
-    if len(ids) < RING_MIN_CTS or np.ptp(uv[:, 1]) > RING_MAX_HEIGHT_RADII * float(np.median(extent)):
+def _on_one_ring(ids: np.ndarray, uv: np.ndarray, extent: np.ndarray, count: int, run: np.ndarray) -> bool:
+    """Do one stripe's equally large runs of CTs (``ids`` of a stripe of ``count``, image
+    centres ``uv``, label radii ``extent``, pixels; ``run`` labels) lie along one band in ID
+    order (:data:`RING_MAX_HEIGHT_RADII`, :data:`RING_GAP_RANGE`)?"""
+    if np.ptp(uv[:, 1]) > RING_MAX_HEIGHT_RADII * float(np.median(extent)):
         return False
     order = np.argsort(uv[:, 0])
     steps = np.diff(ids[order]) % count  # cyclic steps from left to right
-    return bool((steps < count / 2).all() or (steps > count / 2).all())
+    steps = np.where((steps > count / 2).all(), count - steps, steps)  # IDs may run right to left
+    if not (0 < steps).all() or steps.sum() >= count / 2:
+        return False
+    per_step = np.diff(uv[order, 0]) / steps
+    inside = run[order][1:] == run[order][:-1]
+    if not inside.any() or inside.all():
+        return False
+    spacing = float(np.median(per_step[inside]))
+    lo, hi = RING_GAP_RANGE
+    return bool(((per_step[~inside] >= lo * spacing) & (per_step[~inside] <= hi * spacing)).all())
 
 
 def _theta_dir(ct_id: int, first: int, count: int, centres: dict) -> np.ndarray | None:
