@@ -4,11 +4,12 @@ from __future__ import annotations
 
 import json
 
+import pandas as pd
 import pytest
 
 from triaxtrack.cli import main
 from triaxtrack.optics import read_cameras
-from triaxtrack.score import ScoreTolerances, score
+from triaxtrack.score import COLUMNS, ScoreTolerances, _metric, score, summarise_frames
 
 
 def test_truth_scores_perfectly_and_errors_fail(small_test, tmp_path):
@@ -214,3 +215,18 @@ def test_a_camera_left_out_by_the_workflow_is_reported_not_failed():
     left_out = {"c": "video file not found"}
     rows = score_cameras(result, cams, ScoreTolerances(), left_out=left_out).set_index("metric")
     assert "camera_missing" not in rows.index and rows.loc["camera_left_out", "passed"]
+
+
+def test_a_metric_measured_at_no_frame_has_no_worst_frame():
+    """The top pedestal in no picture: its CTs' RMS is NaN at every frame. The summary keeps the
+    first and last frames of it (NaN) and the worst of the other metrics, and does not fail."""
+    rows = [
+        _metric("top_ct_rms", f"all@{f}", float("nan"), float("nan"), "mm", "points.parquet")
+        for f in range(4)
+    ]
+    rows += [
+        _metric("membrane_rms_error", f"all@{f}", 0.01 * f, 0.05, "mm", "points.parquet") for f in range(4)
+    ]
+    out = summarise_frames(pd.DataFrame(rows, columns=COLUMNS))
+    assert sorted(out.loc[out.metric == "top_ct_rms", "item"]) == ["all@0", "all@3"]
+    assert "worst@3" in set(out.loc[out.metric == "membrane_rms_error", "item"])

@@ -365,7 +365,7 @@ def summarise_frames(df: pd.DataFrame) -> pd.DataFrame:
     first, last = frame.min(), frame.max()
     keep = [df[frame.isin([first, last])]]
     for metric, g in df.groupby("metric", sort=False):
-        if g["item"].nunique() <= 2:
+        if g["item"].nunique() <= 2 or g["value"].isna().all():  # all NaN: nothing measured, no worst
             continue
         worst = g.loc[g["value"].idxmin() if metric in AT_LEAST else g["value"].idxmax()]
         keep.append(worst.to_frame().T.assign(item="worst@" + str(worst["item"]).rsplit("@", 1)[1]))
