@@ -327,6 +327,23 @@ def test_a_camera_without_wall_targets_is_posed_through_the_wall(scene):
     _check_poses(rec, scene["cameras"])
 
 
+def test_a_wall_fit_unlike_the_printed_cell_poses_every_camera_through_it(scene, cell_rec, monkeypatch):
+    """The cameras posed in air agree on a cell unlike the printed one (as at a close, low ring
+    where each sees a short arc of one band: scale 0.964, axis tilted 10.9 degrees): it is not
+    trusted, and every camera is posed through the wall against the kit's cell."""
+    import triaxtrack.sfm as sfm
+
+    assert sfm.is_printed_cell(cell_rec)
+    broken = replace(cell_rec, scale=0.964, axis_tilt_deg=10.9)
+    assert not sfm.is_printed_cell(broken)
+    monkeypatch.setattr(sfm, "_air_reconstruction", lambda *args: broken)
+    wall, water = _wall_and_water(scene)
+    cell = scene["cell"]
+    rec = reconstruct_cell(scene["intrinsics"], scene["labels"], wall, SfmConfig(), water=water, cell=cell)
+    assert rec.nominal and {v["pose_from"] for v in rec.posed_from.values()} == {"water"}
+    _check_poses(rec, scene["cameras"])
+
+
 def test_cameras_that_share_too_few_wall_targets_are_posed_through_it(scene):
     """Two cameras each pose from their own strip of the wall, with no target in common (close
     cameras far apart): no bundle to adjust, so every camera is posed through the wall against

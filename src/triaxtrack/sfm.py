@@ -47,6 +47,13 @@ COLMAP_PIXEL_OFFSET = 0.5  # COLMAP puts the centre of the top-left pixel at (0.
 FULL_OPENCV_DIST = 8  # k1 k2 p1 p2 k3 k4 k5 k6: COLMAP's FULL_OPENCV holds both OpenCV models
 MAX_BA_ROUNDS = 4  # bundle adjustments, each after dropping the observations above the limit
 REFERENCE_FRAME = 0  # the frame whose water targets are at their design positions (undeformed specimen)
+# A cell fitted in air is trusted only if it is the printed cell: its scale against the design
+# within MAX_SCALE_ERROR and its axis within MAX_AXIS_TILT_DEG of the design's (a sound fit: 1e-4
+# and 0.02 deg). Cameras that each see a short arc of one band (a close, low ring) can agree on a
+# wrong one (at a 260 mm ring: scale 0.964, tilt 10.9 deg); the cameras are then posed through
+# the wall against the kit's cell
+MAX_SCALE_ERROR = 0.01
+MAX_AXIS_TILT_DEG = 1.0
 NOMINAL_RADIUS_SIGMA_MM = 0.5  # standard error of a nominal outer radius (tube tolerance), the
 # prior of triaxtrack.triangulate.refine_cell when the radius was not fitted in air
 
@@ -316,8 +323,14 @@ def _air_reconstruction(
         multi = obs["id"].map(counts).fillna(0).to_numpy() >= 2
         reason[used & ~multi] = "seen by one camera"
         used &= multi
+        # a camera left with too few targets is not posed by them (it is posed through the wall)
+        per_cam = obs.loc[used, "camera"].value_counts()
+        few = obs["camera"].map(per_cam).fillna(0).to_numpy() < cfg.min_targets
+        reason[used & few] = f"camera left with fewer than {cfg.min_targets} targets"
+        used &= ~few
+        posed = {n: c for n, c in posed.items() if per_cam.get(n, 0) >= cfg.min_targets}
         sel = obs[used]
-        if sel["id"].nunique() < cfg.min_targets:
+        if len(posed) < 2 or sel["id"].nunique() < cfg.min_targets:
             return None
         adj_cams, adj_pts = bundle_adjust(
             posed, sel, design[design["id"].isin(sel["id"])], cfg.refine_intrinsics
@@ -356,6 +369,12 @@ def _air_reconstruction(
         for n in cams
     }
     return CellReconstruction(cams, pts, res.drop(columns="inlier"), cylinder, tilt, s, {}, posed_from)
+
+
+def is_printed_cell(rec: CellReconstruction) -> bool:
+    """Is the cell fitted in air the printed one: scale within ``MAX_SCALE_ERROR`` of the
+    design's, axis within ``MAX_AXIS_TILT_DEG`` of its z axis?"""
+    return abs(rec.scale - 1.0) <= MAX_SCALE_ERROR and rec.axis_tilt_deg <= MAX_AXIS_TILT_DEG
 
 
 def _nominal_reconstruction(cell: CellOptics, labels: pd.DataFrame) -> CellReconstruction:
@@ -438,8 +457,17 @@ def reconstruct_cell(
     for name in sorted(set(cameras) - set(posed) - set(dropped)):
         dropped[name] = "no frame with enough labelled cell-wall targets"
     rec = _air_reconstruction(posed, obs, design, cfg) if len(posed) >= 2 else None
+    unlike = rec is not None and not is_printed_cell(rec)
+    if unlike and through_water:
+        rec = None
     if rec is None and through_water:
-        why = "no cell frame from the wall" if len(posed) < 2 else "the wall's targets too few in common"
+        why = (
+            "no cell frame from the wall"
+            if len(posed) < 2
+            else "the wall's targets give a cell unlike the printed one (scale or axis)"
+            if unlike
+            else "the wall's targets too few in common"
+        )
         rec = _nominal_reconstruction(cell, labels)
         dropped = {n: dropped.get(n, f"{why}: posed through it") for n in cameras}
     if rec is not None and through_water and dropped:
