@@ -243,6 +243,11 @@ def test_a_stripes_cts_far_from_its_run_are_dropped(kit):
         ends.assign(id=cell + np.array([0, 1, 2, 17, 18, 19])),
     ):
         assert _plausible_cts(bad, design).empty
+    # a CT read as the stripe's next one, next to its run but off the run's arc (between two
+    # bands): dropped, the run kept
+    above = pd.concat([cts.iloc[:5], pd.DataFrame([(ped + 1, 450.0, 160.0)], columns=["id", "u_px", "v_px"])])
+    kept = _plausible_cts(above.assign(extent_px=20.0), design)  # linked to the run, 2 radii above it
+    assert sorted(kept.id) == sorted(cts.id.iloc[:5])
     # a misread pair beside a larger run: the larger run alone is kept, as before
     pair = ends.iloc[[0, 1, 2, 4, 5]]
     assert sorted(_plausible_cts(pair, design).id) == sorted(ends.id.iloc[:3])

@@ -83,7 +83,43 @@ def _plausible_cts(cts: pd.DataFrame, design: dict) -> pd.DataFrame:
             if nb == name and min(steps, count - steps) <= 2:
                 keep[a] = True
     keep &= _in_main_run(ids, uv, cts.extent_px.to_numpy(float), stripes)
+    keep &= _on_stripe_arc(ids, uv, cts.extent_px.to_numpy(float), stripes, keep)
     return cts[keep].reset_index(drop=True)
+
+
+# A stripe's CTs lie on the image of one horizontal circle: a smooth arc v(u). A CT farther than
+# ARC_MAX_RADII label radii from the parabola through its stripe's other kept CTs (ARC_MIN_OTHERS
+# or more) is a misread (at a 420 mm ring, a CT read as the top pedestal's 1 next to its 2..7
+# sat 3 label radii above their arc, between the pedestal and the cell's top band)
+ARC_MAX_RADII = 1.5
+ARC_MIN_OTHERS = 4
+
+
+def _on_stripe_arc(
+    ids: np.ndarray, uv: np.ndarray, extent: np.ndarray, stripes: dict, keep: np.ndarray
+) -> np.ndarray:
+    """Which CTs lie on the arc of their stripe's other kept CTs (:data:`ARC_MAX_RADII`), the
+    farthest off dropped first, one at a time (True where too few others to tell)."""
+    names = np.array([stripes[int(t)][0] for t in ids])
+    out = np.ones(len(ids), bool)
+    for name in np.unique(names[keep]):
+        while True:
+            sel = np.nonzero(keep & out & (names == name))[0]
+            if len(sel) <= ARC_MIN_OTHERS:
+                break
+            off = np.array([_arc_offset(uv[sel[sel != a]], uv[a]) / extent[a] for a in sel])
+            worst = int(np.argmax(off))
+            if off[worst] <= ARC_MAX_RADII:
+                break
+            out[sel[worst]] = False
+    return out
+
+
+def _arc_offset(uv: np.ndarray, at: np.ndarray) -> float:
+    """Height (pixels) of ``at`` off the parabola v(u) through the points ``uv``."""
+    u0, span = uv[:, 0].mean(), max(float(np.ptp(uv[:, 0])), 1.0)
+    coef = np.polyfit((uv[:, 0] - u0) / span, uv[:, 1], 2)
+    return float(abs(at[1] - np.polyval(coef, (at[0] - u0) / span)))
 
 
 def _in_main_run(ids: np.ndarray, uv: np.ndarray, extent: np.ndarray, stripes: dict) -> np.ndarray:
