@@ -130,16 +130,38 @@ def _design(vel: np.ndarray, uv: np.ndarray) -> np.ndarray:
 
 
 def _fit_side(d: np.ndarray, vel: np.ndarray, at_k: np.ndarray) -> tuple:
-    """The lag and field coefficients of one side's departures (see :func:`estimate_lag`)."""
+    """The lag and field coefficients of one side's departures (see :func:`estimate_lag`), by
+    backward elimination: the coefficient least distinguishable from zero (under
+    ``SIGNIFICANT_SIGMAS`` standard errors) is dropped and the others fitted again, until all
+    left are significant. The lag and the field are nearly collinear when the dots' velocity is
+    itself a field across the image (a uniform axial strain moves them in proportion to their
+    height): zeroing one of such a pair after a joint fit left half a correction, of the wrong
+    size. Returns the lag, its standard error (from the last fit that held it), the field's six
+    coefficients (0 where dropped), the dots and their RMS speed."""
     A = _design(vel, at_k)
     y = np.r_[d[:, 0], d[:, 1]]
-    sol, *_ = np.linalg.lstsq(A, y, rcond=None)
-    resid = y - A @ sol
-    s2 = float(resid @ resid) / max(len(y) - A.shape[1], 1)
-    se = np.sqrt(s2 * np.diag(np.linalg.pinv(A.T @ A)))
-    coef = np.where(np.abs(sol) > SIGNIFICANT_SIGMAS * se, sol, 0.0)
+    active = np.ones(A.shape[1], bool)
+    sol = np.zeros(A.shape[1])
+    lag_se = np.inf
+    while active.any():
+        a = A[:, active]
+        coef, *_ = np.linalg.lstsq(a, y, rcond=None)
+        resid = y - a @ coef
+        s2 = float(resid @ resid) / max(len(y) - a.shape[1], 1)
+        se = np.sqrt(s2 * np.diag(np.linalg.pinv(a.T @ a)))
+        sol = np.zeros(A.shape[1])
+        sol[active] = coef
+        if active[0]:
+            lag_se = float(se[0])
+        t = np.abs(coef) / np.maximum(se, 1e-300)
+        weakest = int(np.argmin(t))
+        if t[weakest] >= SIGNIFICANT_SIGMAS:
+            break
+        active[np.nonzero(active)[0][weakest]] = False
+    else:
+        sol = np.zeros(A.shape[1])
     speed = float(np.sqrt((vel * vel).sum() / len(vel)))
-    return float(sol[0]), float(se[0]), *map(float, coef[1:]), len(vel), speed
+    return float(sol[0]), lag_se, *map(float, sol[1:]), len(vel), speed
 
 
 def estimate_lag(
