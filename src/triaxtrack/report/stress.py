@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 import pandas as pd
+from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 
 from triaxtrack.report.style import PALETTE, new_figure, no_data, styled
@@ -22,17 +23,24 @@ def _finite(*arrays: np.ndarray) -> bool:
     return all(np.isfinite(np.asarray(a, float)).any() for a in arrays)
 
 
+def _axes(
+    stress: pd.DataFrame, width_px: int, height_px: int, **labels: str
+) -> tuple[pd.DataFrame, Figure, Axes]:
+    """``stress`` in frame order, and a new figure with one axes set with ``labels``."""
+    fig = new_figure(width_px, height_px)
+    ax = fig.subplots()
+    ax.set(**labels)
+    return stress.sort_values("frame"), fig, ax
+
+
 @styled
 def q_strain_figure(stress: pd.DataFrame, width_px: int = 900, height_px: int = 520) -> Figure:
     """Deviator stress q (kPa) against axial strain (%): on the measured mean area V/H (with its
     +- 1 sigma band), the mid-height section and the smallest section, against the measured
     strain; the lab's standard q (A0 (1 - ev) / (1 - ea), the log's strain) against the log's
     strain."""
-    s = stress.sort_values("frame")
-    fig = new_figure(width_px, height_px)
-    ax = fig.subplots()
-    ax.set(title="deviator stress against axial strain", xlabel="axial strain (%, compression positive)",
-           ylabel="q (kPa)")  # fmt: skip
+    s, fig, ax = _axes(stress, width_px, height_px, title="deviator stress against axial strain",
+                       xlabel="axial strain (%, compression positive)", ylabel="q (kPa)")  # fmt: skip
     ea = 100 * s["axial_strain"].to_numpy(float)
     if not _finite(ea, s["q_mean_kpa"]):
         no_data(ax)
@@ -53,11 +61,9 @@ def q_strain_figure(stress: pd.DataFrame, width_px: int = 900, height_px: int = 
 def volumetric_figure(stress: pd.DataFrame, width_px: int = 900, height_px: int = 420) -> Figure:
     """Volumetric strain (%) against axial strain (%): measured by the cameras, and from the
     log's volume gauge (over the nominal volume) against the log's strain where the log has one."""
-    s = stress.sort_values("frame")
-    fig = new_figure(width_px, height_px)
-    ax = fig.subplots()
-    ax.set(title="volumetric strain against axial strain (contraction positive)",
-           xlabel="axial strain (%)", ylabel="volumetric strain (%)")  # fmt: skip
+    title = "volumetric strain against axial strain (contraction positive)"
+    s, fig, ax = _axes(stress, width_px, height_px, title=title, xlabel="axial strain (%)",
+                       ylabel="volumetric strain (%)")  # fmt: skip
     if not _finite(s["axial_strain"], s["volumetric_strain"]):
         no_data(ax)
         return fig
@@ -74,11 +80,8 @@ def volumetric_figure(stress: pd.DataFrame, width_px: int = 900, height_px: int 
 def modulus_figure(stress: pd.DataFrame, width_px: int = 900, height_px: int = 420) -> Figure:
     """Secant (with its +- 1 sigma band) and tangent Young's modulus (MPa) against the measured
     axial strain (%) on a logarithmic axis (strains > 0 only)."""
-    s = stress.sort_values("frame")
-    fig = new_figure(width_px, height_px)
-    ax = fig.subplots()
-    ax.set(title="Young's modulus against axial strain", xlabel="axial strain (%, log scale)",
-           ylabel="E (MPa)")  # fmt: skip
+    s, fig, ax = _axes(stress, width_px, height_px, title="Young's modulus against axial strain",
+                       xlabel="axial strain (%, log scale)", ylabel="E (MPa)")  # fmt: skip
     ea = 100 * s["axial_strain"].to_numpy(float)
     sec = s["e_secant_kpa"].to_numpy(float) / 1000
     if not _finite(np.where(ea > 0, sec, np.nan)):
