@@ -344,6 +344,23 @@ def test_a_wall_fit_unlike_the_printed_cell_poses_every_camera_through_it(scene,
     _check_poses(rec, scene["cameras"])
 
 
+def test_a_camera_the_bundle_adjustment_leaves_with_too_few_targets_is_posed_through_the_wall(
+    scene, cell_rec, monkeypatch
+):
+    """The bundle adjustment drops so many of a camera's wall observations that fewer than
+    min_targets are left: the camera is not lost but posed through the wall."""
+    import triaxtrack.sfm as sfm
+
+    short = replace(cell_rec, cameras={n: c for n, c in cell_rec.cameras.items() if n != "cam05"})
+    monkeypatch.setattr(sfm, "_air_reconstruction", lambda *args: short)
+    wall, water = _wall_and_water(scene)
+    cell = scene["cell"]
+    rec = reconstruct_cell(scene["intrinsics"], scene["labels"], wall, SfmConfig(), water=water, cell=cell)
+    assert not rec.dropped and len(rec.cameras) == len(scene["cameras"])
+    assert rec.posed_from["cam05"]["pose_from"] == "water"
+    _check_poses(rec, scene["cameras"])
+
+
 def test_cameras_that_share_too_few_wall_targets_are_posed_through_it(scene):
     """Two cameras each pose from their own strip of the wall, with no target in common (close
     cameras far apart): no bundle to adjust, so every camera is posed through the wall against

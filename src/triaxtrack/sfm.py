@@ -457,6 +457,8 @@ def reconstruct_cell(
     for name in sorted(set(cameras) - set(posed) - set(dropped)):
         dropped[name] = "no frame with enough labelled cell-wall targets"
     rec = _air_reconstruction(posed, obs, design, cfg) if len(posed) >= 2 else None
+    for name in sorted(set(posed) - set(rec.cameras if rec is not None else posed)):
+        dropped[name] = f"fewer than {cfg.min_targets} cell-wall targets left by the bundle adjustment"
     unlike = rec is not None and not is_printed_cell(rec)
     if unlike and through_water:
         rec = None
