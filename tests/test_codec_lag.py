@@ -5,11 +5,11 @@ import pandas as pd
 import pytest
 
 from triaxtrack.codec_lag import (
+    _coefficients,
     corrected_tracks,
     estimate_lag,
     estimate_lag_chunks,
     lag_corrected,
-    lag_per_frame,
     read_lags,
     write_lags,
 )
@@ -90,7 +90,7 @@ def test_no_keyframe_measured_means_no_correction():
     fixed, lags = lag_corrected(tracks, np.array([], np.int64))
     assert lags.empty
     assert fixed.equals(tracks)
-    assert np.isnan(lag_per_frame(np.array([5]), np.array([0]), lags)).all()
+    assert np.isnan(_coefficients(np.array([5]), np.array([0]), lags)).all()  # nothing measured
 
 
 def test_a_field_across_the_image_is_removed_too():

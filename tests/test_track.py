@@ -9,7 +9,13 @@ import pytest
 from triaxtrack.completion import DotGrid
 from triaxtrack.detect import detect_blobs
 from triaxtrack.optics import Camera, project_air
-from triaxtrack.timesteps import camera_motion, handover_check, large_losses, tracking_summary
+from triaxtrack.timesteps import (
+    camera_motion,
+    handover_check,
+    large_losses,
+    observations_table,
+    tracking_summary,
+)
 from triaxtrack.track import (
     TrackingConfig,
     chunk_frames,
@@ -505,3 +511,21 @@ def test_camera_frames_with_large_losses_are_flagged():
     flagged = large_losses(tracks)
     assert flagged[["camera", "frame", "reported"]].values.tolist() == [["b", 3, 2]]
     assert flagged["share"].iloc[0] == pytest.approx(2 / 9)
+
+
+def test_observations_hold_the_pixels_the_triangulation_used():
+    """A membrane dot offered to the triangulation at a pixel moved by the codec lag: its
+    observation holds that pixel (so u_px + du_px is the reprojection); a cell-wall dot not
+    offered keeps its tracked centroid; a target not reported is not an observation."""
+    tracks = pd.DataFrame({
+        "camera": "cam01", "frame": 3, "id": [101, 1001, 1002], "u_px": [10.0, 20.0, 30.0],
+        "v_px": [5.0, 6.0, 7.0], "area_px": 20.0, "sigma_px": 0.02, "reason": ["", "", "lost"],
+    })  # fmt: skip
+    residuals = pd.DataFrame({
+        "camera": ["cam01"], "frame": [3], "id": [1001], "u_px": [20.04], "v_px": [5.97],
+        "du_px": [0.01], "dv_px": [-0.02], "used": [True], "reason": [""],
+    })  # fmt: skip
+    obs = observations_table(tracks, residuals).set_index("id")
+    assert list(obs.index) == [101, 1001]
+    assert obs.loc[1001, ["u_px", "v_px"]].tolist() == [20.04, 5.97] and obs.loc[1001, "used"]
+    assert obs.loc[101, ["u_px", "v_px"]].tolist() == [10.0, 5.0] and not obs.loc[101, "used"]

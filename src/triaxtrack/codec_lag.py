@@ -276,7 +276,7 @@ def _coefficients(frames: np.ndarray, keyframes: np.ndarray, lags: pd.DataFrame)
         b = before.get(nxt) if nxt is not None else before.get(prev)  # and its end
         if prev is not None and nxt is not None:
             span, t = nxt - prev, f - prev
-        elif gop is not None:  # cut by the chunk: a GOP as long as the chunk's others
+        elif gop is not None:  # before the first keyframe or after the last: a GOP as long as the others
             span, t = gop, (f - prev if prev is not None else gop - (nxt - f))
         else:
             span, t = None, None
@@ -285,12 +285,6 @@ def _coefficients(frames: np.ndarray, keyframes: np.ndarray, lags: pd.DataFrame)
         elif a is not None or b is not None:
             out[i] = a if a is not None else b
     return out
-
-
-def lag_per_frame(frames: np.ndarray, keyframes: np.ndarray, lags: pd.DataFrame) -> np.ndarray:
-    """The lag (frames) of each of ``frames`` (:func:`_coefficients`' first column): 0 at
-    keyframes, NaN where no side is measured (no correction possible)."""
-    return _coefficients(frames, keyframes, lags)[:, 0]
 
 
 def _velocity(frames: np.ndarray, uv: np.ndarray) -> np.ndarray:

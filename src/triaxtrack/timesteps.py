@@ -287,10 +287,15 @@ def handover_checks(shared: pd.DataFrame, labels: pd.DataFrame, tol_px: float = 
 def observations_table(tracks: pd.DataFrame, residuals: pd.DataFrame) -> pd.DataFrame:
     """``OBSERVATIONS`` of the whole test: every reported tracked target (cell wall too), with
     its reprojection residual ``du_px, dv_px`` where it was offered to the triangulation, ``used``
-    (it entered a 3-D point) and ``reason`` (why not; '' when used or not in the water)."""
-    res = residuals[["camera", "frame", "id", "du_px", "dv_px", "used", "reason"]]
+    (it entered a 3-D point) and ``reason`` (why not; '' when used or not in the water). Where it
+    was offered, ``u_px, v_px`` are the pixel the triangulation used (a P frame's membrane dot
+    moved by the codec lag, ``triaxtrack.codec_lag``), so that ``u_px + du_px`` is the
+    reprojection; elsewhere the tracked centroid."""
+    res = residuals[["camera", "frame", "id", "u_px", "v_px", "du_px", "dv_px", "used", "reason"]]
     obs = tracks.loc[tracks["reason"] == "", ["camera", "frame", "id", "u_px", "v_px"]]
-    out = obs.merge(res, on=["camera", "frame", "id"], how="left")
+    out = obs.merge(res, on=["camera", "frame", "id"], how="left", suffixes=("_tracked", ""))
+    for axis in ("u_px", "v_px"):
+        out[axis] = out[axis].fillna(out.pop(f"{axis}_tracked"))
     out["used"] = out["used"].astype("boolean").fillna(False).astype(bool)
     out["reason"] = out["reason"].fillna("").astype(str)
     return out

@@ -96,7 +96,6 @@ rule collect_timesteps:
         residuals=get_timestep_residuals,
         motion=get_timestep_motion,
         tracks=get_all_tracks,
-        lags=get_codec_lags,
         handovers=get_all_handovers,
         labels="results/{test}/labels.parquet",
         reference="results/{test}/reconstruction/quality.json",

@@ -4,7 +4,6 @@ import json
 
 import pandas as pd
 
-from triaxtrack.codec_lag import corrected_tracks, read_lag_files
 from triaxtrack.kit import load_kit_design, target_table
 from triaxtrack.logs import log_to
 from triaxtrack.tables import (
@@ -27,8 +26,6 @@ points = concat_tables(snakemake.input.points, POINTS)
 residuals = concat_tables(snakemake.input.residuals, RESIDUALS)
 motion = concat_tables(snakemake.input.motion, MOTION)
 tracks = concat_tables(snakemake.input.tracks, TRACKS)
-if snakemake.input.lags:  # the centroids triangulate_chunk used: P frames moved by the codec lag
-    tracks = corrected_tracks(tracks, read_lag_files(snakemake.input.lags))
 shared = concat_tables(snakemake.input.handovers, TRACKS)
 handovers = handover_checks(shared, read_table(snakemake.input.labels, LABELS), snakemake.params.handover_px)
 reference = json.load(open(snakemake.input.reference))
