@@ -29,10 +29,11 @@ the extrapolation shares its noise, and biases the ratio by as much as the lag i
 carries no weight, so a static test gives no correction.
 
 Each P frame's membrane dots are then moved forward by ``lag x'`` (``x'`` the dot's velocity
-from its own centroids, pixels per frame) and by the field, the coefficients interpolated
-linearly in time across the GOP, from those measured just after its keyframe to those measured just
-before the next (frames before the first keyframe given, or after the last, take the missing end
-from the neighbouring GOP). What is left: a departure that grows within the
+from its own P-frame centroids around that frame, pixels per frame) and by the field, the
+coefficients interpolated linearly in time across the GOP, from those measured just after its
+keyframe to those measured just before the next (frames before the first keyframe given, or
+after the last, take the missing end from the neighbouring GOP). What is left: a departure that
+grows within the
 last few frames of a GOP (x264's rate control spends fewer bits on frames no later frame
 refers to) is measured only as its mean over the ``SIDE_FRAMES`` before the keyframe.
 Keyframes, and the other targets (cell wall, pedestal CTs), are left as they are.
@@ -58,6 +59,8 @@ SIDE_FRAMES = 5  # P frames extrapolated to the keyframe on each side (at least 
 MIN_SIDE_FRAMES = 4  # fewer on a side: that side of the keyframe is not measured
 FAR_FRAMES = 10  # the P frames beyond those that give the velocity (at least MIN_FAR_FRAMES)
 MIN_FAR_FRAMES = 4
+VELOCITY_FRAMES = 8  # the correction's velocity: a line through the P frames this many frames either side
+MIN_VELOCITY_FRAMES = 5  # P frames needed in that window (else the dot is not moved along its motion)
 MIN_DOTS = 30  # dots needed (with every frame of the side reported) to measure a lag
 SIGNIFICANT_SIGMAS = 3.0  # a lag within this many standard errors of zero is not applied
 FIRST_MEMBRANE_ID = 1001  # the membrane dots (target-kit.md): the small dots the field is measured on
@@ -287,23 +290,35 @@ def _coefficients(frames: np.ndarray, keyframes: np.ndarray, lags: pd.DataFrame)
     return out
 
 
-def _velocity(frames: np.ndarray, uv: np.ndarray) -> np.ndarray:
-    """Each dot's velocity (pixels per frame) at each frame: the derivative of a least-squares
-    quadratic in time through all its reported centroids of the chunk (NaN with fewer than 3).
-    Smooth on purpose: the correction multiplies it by the lag, which on nearly static dots can
-    be several frames, so a frame-to-frame difference would add its noise to every centroid."""
-    t = (frames - frames.mean()).astype(np.float64)
-    A = np.c_[np.ones_like(t), t, t * t]  # (F, 3)
-    ok = np.isfinite(uv).all(axis=2)  # (F, N)
-    w = ok.astype(np.float64)
-    y = np.nan_to_num(uv)  # (F, N, 2)
-    normal = np.einsum("fn,fi,fj->nij", w, A, A)  # (N, 3, 3)
-    rhs = np.einsum("fn,fi,fnd->nid", w, A, y)  # (N, 3, 2)
-    fit = ok.sum(axis=0) >= 3
-    coef = np.full((uv.shape[1], 3, 2), np.nan)
-    if fit.any():
-        coef[fit] = np.linalg.solve(normal[fit], rhs[fit])
-    return coef[None, :, 1, :] + 2 * coef[None, :, 2, :] * t[:, None, None]
+def _velocity(frames: np.ndarray, uv: np.ndarray, keyframes: np.ndarray) -> np.ndarray:
+    """Each dot's velocity (pixels per frame) at each frame: the slope of a least-squares line
+    through its reported P-frame centroids within ``VELOCITY_FRAMES`` frames either side (NaN
+    with fewer than ``MIN_VELOCITY_FRAMES``). Local, so that a test's holds, reversals and
+    changes of rate within a chunk are followed (a quadratic over a whole chunk of a ramp, a hold
+    and an unload gave velocities wrong by a third of the ramp's, moving P frames by 0.03 px);
+    over P frames only, since a keyframe shows the dot where it is and the P frames ``lag``
+    frames behind, a step the line would take for motion; smooth, since the correction
+    multiplies it by the lag, which on nearly static dots can be several frames."""
+    t = frames.astype(np.float64)
+    ok = np.isfinite(uv).all(axis=2) & ~np.isin(frames, np.asarray(keyframes, np.int64))[:, None]
+    y = np.nan_to_num(uv)
+    s0, s1, s2 = (np.zeros(ok.shape) for _ in range(3))  # sums of w, w dt, w dt^2
+    sy, sty = np.zeros(uv.shape), np.zeros(uv.shape)  # sums of w y, w dt y
+    f = len(t)
+    for d in range(-VELOCITY_FRAMES, VELOCITY_FRAMES + 1):  # processed frames are >= 1 frame apart
+        i = np.arange(max(0, -d), min(f, f - d))  # frame i's neighbour i + d
+        dt = (t[i + d] - t[i])[:, None]
+        w = ok[i + d] & (np.abs(dt) <= VELOCITY_FRAMES)
+        s0[i] += w
+        s1[i] += w * dt
+        s2[i] += w * dt * dt
+        sy[i] += w[..., None] * y[i + d]
+        sty[i] += (w * dt)[..., None] * y[i + d]
+    det = s0 * s2 - s1 * s1
+    good = (s0 >= MIN_VELOCITY_FRAMES) & (det > 0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        slope = (s0[..., None] * sty - s1[..., None] * sy) / det[..., None]
+    return np.where(good[..., None], slope, np.nan)
 
 
 def correct_lag(tracks: pd.DataFrame, keyframes: np.ndarray, lags: pd.DataFrame) -> pd.DataFrame:
@@ -316,7 +331,7 @@ def correct_lag(tracks: pd.DataFrame, keyframes: np.ndarray, lags: pd.DataFrame)
     coef = np.nan_to_num(_coefficients(frames, keyframes, lags))
     if not coef.any():
         return tracks.copy()
-    vel = np.nan_to_num(_velocity(frames, uv))
+    vel = np.nan_to_num(_velocity(frames, uv, keyframes))
     x = np.nan_to_num(uv) / FIELD_SCALE_PX
     c = coef[:, None, :]
     shift = np.stack([
