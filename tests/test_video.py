@@ -12,7 +12,6 @@ import pytest
 from triaxtrack.video import (
     SparseFrames,
     VideoWriter,
-    _encoder_options,
     concat_videos,
     encode_video,
     iter_frames,
@@ -20,6 +19,7 @@ from triaxtrack.video import (
     probe_video,
     read_frame,
 )
+from triaxtrack.video.write import _encoder_options
 
 W, H = 160, 120
 FPS = 30

@@ -26,7 +26,7 @@ from matplotlib.colors import Normalize, to_rgb
 from triaxtrack.report.common import MIN_RANGE, half_range
 from triaxtrack.report.layout import MembraneLayout
 from triaxtrack.report.style import DIVERGING_CMAP, MISSING, figure_image, new_figure, styled
-from triaxtrack.video import CODECS, ENCODER_THREADS
+from triaxtrack.video.write import CODECS, ENCODER_THREADS
 
 __all__ = ["DIVERGING", "specimen_frames", "write_movie", "write_movie_page"]
 
