@@ -38,11 +38,11 @@ lint: $(STAMP)
 	$(BIN)/snakemake --lint
 
 # Installs trackpy (extra `bench`) once, for the linking comparison; the bench runs without it.
-# Options: make bench BENCH_ARGS="--size 1280x720 --frames 12" (see python -m triaxtrack.bench -h).
+# Options: make bench BENCH_ARGS="--size 1280x720 --frames 12" (see python bench/pipeline.py -h).
 bench: $(STAMP)
 	@$(BIN)/python -c 'import trackpy' 2>/dev/null || $(BIN)/python -m pip install -e '.[dev,bench]' \
 	  || echo "warning: trackpy could not be installed (pip install -e '.[dev,bench]'): its line is skipped"
-	$(BIN)/python -m triaxtrack.bench $(BENCH_ARGS)
+	$(BIN)/python bench/pipeline.py $(BENCH_ARGS)
 
 dag: $(STAMP)
 	mkdir -p results

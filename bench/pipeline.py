@@ -1,4 +1,5 @@
-"""Benchmarks that print figures (they assert nothing): ``python -m triaxtrack.bench [what ...]``.
+"""Benchmarks that print figures (they assert nothing): ``python bench/pipeline.py [what ...]``, or
+``make bench BENCH_ARGS="[what ...] [options]"``.
 
 ``tracking`` (the default): the first ``--frames`` frames (default 24) of one camera of a simulated
 ``--test-frames``-frame test (default 100, as the workflow's demo: the dots move as fast per frame)
@@ -42,12 +43,17 @@ import sys
 import tempfile
 import time
 import tracemalloc
+from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pandas as pd
 
-KIT_DESIGN = Path(__file__).resolve().parents[2] / "config" / "kit.yaml"
+if TYPE_CHECKING:
+    from triaxtrack.track import TrackingConfig
+
+KIT_DESIGN = Path(__file__).resolve().parents[1] / "config" / "kit.yaml"
 _CODEC_NAMES = {"h264": "H.264", "h265": "H.265"}
 
 
@@ -193,9 +199,10 @@ def _render_video(tmp: Path, width: int, height: int, frames: int, test_frames: 
     camera = camera_names(cfg.cameras)[0]
     _log(f"rendering {frames} frames of {camera} at {width}x{height} ...")
     t0 = time.perf_counter()
-    code = "import sys; from triaxtrack.bench import _simulate_clip; _simulate_clip(*sys.argv[1:])"
+    # this file is a script, not a module of the package: the child runs it by path (not as __main__)
+    code = "import runpy, sys; runpy.run_path(sys.argv[1])['_simulate_clip'](*sys.argv[2:])"
     argv = [str(x) for x in (tmp, width, height, frames, test_frames, seed, int(h265), gop)]
-    subprocess.run([sys.executable, "-c", code, *argv], check=True)
+    subprocess.run([sys.executable, "-c", code, str(Path(__file__).resolve()), *argv], check=True)
     return {"cfg": cfg, "camera": camera, "test": tmp / "test", "video": tmp / "video.mp4",
             "video265": tmp / "video265.mp4", "observations": tmp / "truth.parquet",
             "render_s": time.perf_counter() - t0}  # fmt: skip
@@ -255,138 +262,215 @@ def _link_errors(linked: pd.DataFrame, tracks: pd.DataFrame, tol_px: float = 1.0
     }
 
 
+@dataclass(frozen=True)
+class _Clip:
+    """The rendered clip and what tracking it needs: ``video`` (H.264) and ``videos`` (per codec
+    benchmarked), the ``fmap`` of its ``n`` frames (:func:`triaxtrack.frames.frame_map`), the
+    ``camera`` name and its truth model ``cam``, the ``kit`` design with its CT ``codes`` and the
+    tracking settings ``tcfg``."""
+
+    video: Path
+    videos: dict[str, Path]
+    camera: str
+    fmap: pd.DataFrame
+    n: int
+    cam: Any
+    kit: dict
+    codes: Any
+    tcfg: TrackingConfig
+
+
+def _load_clip(sim: dict, codecs: tuple) -> tuple[_Clip, dict]:
+    """The rendered clip of :func:`_render_video` (``sim``) read back for tracking, and its
+    figures: ``camera``, ``sim`` (the simulation settings), ``render_s``, ``render_peak_mb``, the
+    ``video``'s probe, ``video_mb`` and per codec the video's size in MB (``codecs``)."""
+    from triaxtrack.frames import CameraTiming, frame_map
+    from triaxtrack.kit import ct_codes, load_kit_design, target_table
+    from triaxtrack.optics import read_cameras
+    from triaxtrack.track import TrackingConfig
+    from triaxtrack.video import probe_video
+
+    video, camera, cfg = sim["video"], sim["camera"], sim["cfg"]
+    videos = {c: sim["video265" if c == "h265" else "video"] for c in codecs}
+    figures = dict(
+        camera=camera,
+        sim=cfg,
+        render_s=sim["render_s"],
+        render_peak_mb=_maxrss_mb(resource.RUSAGE_CHILDREN),
+        video=probe_video(video),
+        video_mb=video.stat().st_size / 2**20,
+        codecs={c: videos[c].stat().st_size / 2**20 for c in codecs},
+    )
+    n = figures["video"]["frames"]
+    fmap = frame_map(CameraTiming(camera, cfg.fps), n, n)
+    cam = read_cameras(sim["test"] / "truth" / "cameras.json")[camera]
+    kit = load_kit_design(sim["test"] / "kit")
+    codes = ct_codes(kit, target_table(kit))
+    return _Clip(video, videos, camera, fmap, n, cam, kit, codes, TrackingConfig()), figures
+
+
+def _label_first_frame(clip: _Clip) -> tuple[pd.DataFrame, dict]:
+    """The first frame's labels (:func:`triaxtrack.identify.label_frame`), and the figures:
+    ``label_s`` (seconds), ``labelled`` (targets), ``detections``, ``spacing_px`` (per label, to
+    the nearest detection) and ``warmup_s`` (seconds to load, or compile, the tracker's kernels,
+    tracking the first frame once)."""
+    import triaxtrack.track as track
+    from triaxtrack.frames import iter_test_frames
+    from triaxtrack.identify import label_frame
+
+    _log("labelling the first frame ...")
+    first = next(iter_test_frames(clip.video, clip.fmap, 0, 1))[1]
+    t0 = time.perf_counter()
+    labels = label_frame(first, clip.cam, clip.kit, clip.codes)
+    label_s = time.perf_counter() - t0
+    own = labels[labels["id"] > 0]
+    spacing_px = track._init_state(labels, clip.tcfg).spacing
+    t0 = time.perf_counter()  # the compiled kernels: loaded from numba's cache (or compiled)
+    track.track_frames([(0, first)], labels, clip.camera, [0], clip.tcfg)
+    return labels, {"label_s": label_s, "labelled": own["id"].nunique(), "detections": len(labels),
+                    "spacing_px": spacing_px, "warmup_s": time.perf_counter() - t0}  # fmt: skip
+
+
+def _time_modes(clip: _Clip, labels: pd.DataFrame, repeat: int, codecs: tuple) -> tuple[dict, dict]:
+    """Per codec, decoding only, the pipeline (decoding and ``track_frames`` on every frame) and
+    fast mode (one processed frame a GOP, on every keyframe), ``repeat`` times each, alternated.
+    Returns the figures (best seconds ``decode_s``, ``pipeline_s``, ``fast_s``; fast mode's
+    ``keys`` and frames ``decoded``; ``fast_vs_every_px`` (:func:`_largest_difference`); the first
+    codec's every-frame ``tracks``) and the peak memory of each stage (MiB)."""
+    import triaxtrack.track as track
+    from triaxtrack.frames import ProcessedTestFrames, iter_test_frames, keyframe_test_frames
+
+    fmap, n, camera, tcfg, videos = clip.fmap, clip.n, clip.camera, clip.tcfg, clip.videos
+
+    def decode(path: Path) -> int:
+        return sum(img is not None for _, img in iter_test_frames(path, fmap, 0, n))
+
+    def pipeline(path: Path) -> pd.DataFrame:
+        return track.track_frames(iter_test_frames(path, fmap, 0, n), labels, camera, range(n), tcfg)
+
+    # fast mode: one processed frame a GOP, on every keyframe (as step_s = gop_s)
+    keys = {c: keyframe_test_frames(p, fmap, 0, n) for c, p in videos.items()}
+    decoded: dict[str, int] = {}
+
+    def fast(path: Path) -> pd.DataFrame:
+        codec = next(c for c, p in videos.items() if p == path)
+        sparse = ProcessedTestFrames(path, fmap, 0, n, keys[codec])
+        out = track.track_frames(sparse, labels, camera, keys[codec], tcfg)
+        decoded[codec] = sparse.decoded
+        return out
+
+    _log(f"decode only, decode + tracking and fast mode, {repeat} times each ({', '.join(codecs)}) ...")
+    times: dict[tuple, list[float]] = {}
+    peak_mb: dict[str, float] = {}
+    stages = (("decode", decode), ("pipeline", pipeline), ("fast mode", fast))
+    every_tracks: dict[str, pd.DataFrame] = {}
+    fast_tracks: dict[str, pd.DataFrame] = {}
+    for _ in range(repeat):  # alternate, so that a slow spell of the machine hits both
+        for (codec, path), (name, fn) in itertools.product(videos.items(), stages):
+            _reset_peak()
+            t0 = time.perf_counter()
+            out = fn(path)
+            times.setdefault((codec, name), []).append(time.perf_counter() - t0)
+            stage = name if codec == "h264" else f"{name} {_CODEC_NAMES[codec]}"
+            peak_mb[stage] = max(peak_mb.get(stage, 0.0), _peak_mb())
+            if (codec, name) == (codecs[0], "pipeline"):
+                tracks = out
+            if name == "pipeline":
+                every_tracks[codec] = out
+            if name == "fast mode":
+                fast_tracks[codec] = out
+    figures = {
+        "decode_s": {c: min(times[c, "decode"]) for c in codecs},
+        "pipeline_s": {c: min(times[c, "pipeline"]) for c in codecs},
+        "fast_s": {c: min(times[c, "fast mode"]) for c in codecs},
+        "keys": keys,
+        "decoded": decoded,
+        "fast_vs_every_px": {c: _largest_difference(fast_tracks[c], every_tracks[c]) for c in codecs},
+        "tracks": tracks,
+    }
+    return figures, peak_mb
+
+
+def _time_held(clip: _Clip, labels: pd.DataFrame, held: list[tuple[int, np.ndarray]]) -> tuple[dict, float]:
+    """``track_frames`` on frames already decoded (``held``), best of 3, with the seconds spent in
+    ``_step`` and ``measure_targets``: the figures ``direct_s``, ``step_s``, ``measure_s``
+    (seconds per frame) and the peak memory (MiB)."""
+    import triaxtrack.track as track
+
+    best = None
+    _reset_peak()
+    for _ in range(3):
+        with _Timed(track, "_step") as step, _Timed(track, "measure_targets") as meas:
+            t0 = time.perf_counter()
+            track.track_frames(held, labels, clip.camera, [k for k, _ in held], clip.tcfg)
+            total = time.perf_counter() - t0
+        if best is None or total < best[0]:
+            best = (total, step.seconds, meas.seconds)
+    peak = _peak_mb()
+    direct_s, step_s, measure_s = (x / len(held) for x in best)
+    return {"direct_s": direct_s, "step_s": step_s, "measure_s": measure_s}, peak
+
+
+def _time_brute_force(clip: _Clip, held: list[tuple[int, np.ndarray]]) -> tuple[float, float]:
+    """Seconds per frame of ``label_frame`` (detection and identification) on each held frame,
+    and the peak memory (MiB)."""
+    from triaxtrack.identify import label_frame
+
+    _log(f"label_frame on each of the {len(held)} held frames ...")
+    _reset_peak()
+    t0 = time.perf_counter()
+    for _, img in held:
+        label_frame(img, clip.cam, clip.kit, clip.codes)
+    return (time.perf_counter() - t0) / len(held), _peak_mb()
+
+
+def _detect_every_frame(clip: _Clip) -> tuple[pd.DataFrame, float]:
+    """Every frame's ``detect_blobs`` as trackpy's input (columns ``x``, ``y`` in pixels and
+    ``frame``), and the seconds per frame of detection alone."""
+    from triaxtrack.detect import detect_blobs
+    from triaxtrack.frames import iter_test_frames
+
+    _log("detect_blobs on every frame, for trackpy ...")
+    parts, det_s = [], 0.0
+    for k, img in iter_test_frames(clip.video, clip.fmap, 0, clip.n):
+        t0 = time.perf_counter()
+        blobs = detect_blobs(img)
+        det_s += time.perf_counter() - t0
+        parts.append(pd.DataFrame({"x": blobs["u_px"], "y": blobs["v_px"], "frame": k}))
+    return pd.concat(parts, ignore_index=True), det_s / clip.n
+
+
 def bench_tracking(width: int, height: int, frames: int, hold: int = 6, test_frames: int = 100,
                    seed: int = 1, repeat: int = 3, codecs: tuple = ("h264", "h265"),
                    gop: int = 6) -> dict:  # fmt: skip
     """Decode vs decode + tracking on one simulated camera's video (module docstring)."""
-    import triaxtrack.track as track
-    from triaxtrack.detect import detect_blobs
-    from triaxtrack.frames import (
-        CameraTiming,
-        ProcessedTestFrames,
-        frame_map,
-        iter_test_frames,
-        keyframe_test_frames,
-    )
-    from triaxtrack.identify import label_frame
-    from triaxtrack.kit import ct_codes, load_kit_design, target_table
-    from triaxtrack.optics import read_cameras
-    from triaxtrack.video import probe_video
+    from triaxtrack.frames import iter_test_frames
 
     r: dict = {"peak_mb": {}}
     with tempfile.TemporaryDirectory(prefix="triaxtrack-bench-") as tmp:
         sim = _render_video(Path(tmp), width, height, frames, test_frames, seed, "h265" in codecs, gop)
-        video, camera, cfg = sim["video"], sim["camera"], sim["cfg"]
-        videos = {c: sim["video265" if c == "h265" else "video"] for c in codecs}
-        r.update(
-            camera=camera,
-            sim=cfg,
-            render_s=sim["render_s"],
-            render_peak_mb=_maxrss_mb(resource.RUSAGE_CHILDREN),
-            video=probe_video(video),
-            video_mb=video.stat().st_size / 2**20,
-            codecs={c: videos[c].stat().st_size / 2**20 for c in codecs},
-        )
-        n = r["video"]["frames"]
-        fmap = frame_map(CameraTiming(camera, cfg.fps), n, n)
-        cam = read_cameras(sim["test"] / "truth" / "cameras.json")[camera]
-        kit = load_kit_design(sim["test"] / "kit")
-        codes = ct_codes(kit, target_table(kit))
-        tcfg = track.TrackingConfig()
-
-        _log("labelling the first frame ...")
-        first = next(iter_test_frames(video, fmap, 0, 1))[1]
-        t0 = time.perf_counter()
-        labels = label_frame(first, cam, kit, codes)
-        r["label_s"] = time.perf_counter() - t0
-        own = labels[labels["id"] > 0]
-        r["labelled"], r["detections"] = own["id"].nunique(), len(labels)
-        r["spacing_px"] = track._init_state(labels, tcfg).spacing
-        t0 = time.perf_counter()  # the compiled kernels: loaded from numba's cache (or compiled)
-        track.track_frames([(0, first)], labels, camera, [0], tcfg)
-        r["warmup_s"] = time.perf_counter() - t0
-
-        def decode(path: Path) -> int:
-            return sum(img is not None for _, img in iter_test_frames(path, fmap, 0, n))
-
-        def pipeline(path: Path) -> pd.DataFrame:
-            return track.track_frames(iter_test_frames(path, fmap, 0, n), labels, camera, range(n), tcfg)
-
-        # fast mode: one processed frame a GOP, on every keyframe (as step_s = gop_s)
-        keys = {c: keyframe_test_frames(p, fmap, 0, n) for c, p in videos.items()}
-        decoded: dict[str, int] = {}
-
-        def fast(path: Path) -> pd.DataFrame:
-            codec = next(c for c, p in videos.items() if p == path)
-            sparse = ProcessedTestFrames(path, fmap, 0, n, keys[codec])
-            out = track.track_frames(sparse, labels, camera, keys[codec], tcfg)
-            decoded[codec] = sparse.decoded
-            return out
-
-        _log(f"decode only, decode + tracking and fast mode, {repeat} times each ({', '.join(codecs)}) ...")
-        times: dict[tuple, list[float]] = {}
-        stages = (("decode", decode), ("pipeline", pipeline), ("fast mode", fast))
-        every_tracks: dict[str, pd.DataFrame] = {}
-        fast_tracks: dict[str, pd.DataFrame] = {}
-        for _ in range(repeat):  # alternate, so that a slow spell of the machine hits both
-            for (codec, path), (name, fn) in itertools.product(videos.items(), stages):
-                _reset_peak()
-                t0 = time.perf_counter()
-                out = fn(path)
-                times.setdefault((codec, name), []).append(time.perf_counter() - t0)
-                stage = name if codec == "h264" else f"{name} {_CODEC_NAMES[codec]}"
-                r["peak_mb"][stage] = max(r["peak_mb"].get(stage, 0.0), _peak_mb())
-                if (codec, name) == (codecs[0], "pipeline"):
-                    tracks = out
-                if name == "pipeline":
-                    every_tracks[codec] = out
-                if name == "fast mode":
-                    fast_tracks[codec] = out
-        r["decode_s"] = {c: min(times[c, "decode"]) for c in codecs}
-        r["pipeline_s"] = {c: min(times[c, "pipeline"]) for c in codecs}
-        r["fast_s"] = {c: min(times[c, "fast mode"]) for c in codecs}
-        r["keys"], r["decoded"], r["gop"] = keys, decoded, gop
-        r["fast_vs_every_px"] = {c: _largest_difference(fast_tracks[c], every_tracks[c]) for c in codecs}
-        r["tracks"] = tracks
+        clip, figures = _load_clip(sim, codecs)
+        r.update(figures)
+        labels, figures = _label_first_frame(clip)
+        r.update(figures)
+        figures, peaks = _time_modes(clip, labels, repeat, codecs)
+        r.update(figures, gop=gop)
+        r["peak_mb"].update(peaks)
 
         _log(f"tracking on {hold} decoded frames held in memory ...")
-        held = [(k, img) for k, img in iter_test_frames(video, fmap, 0, min(hold, n))]
-        best = None
-        _reset_peak()
-        for _ in range(3):
-            with _Timed(track, "_step") as step, _Timed(track, "measure_targets") as meas:
-                t0 = time.perf_counter()
-                track.track_frames(held, labels, camera, [k for k, _ in held], tcfg)
-                total = time.perf_counter() - t0
-            if best is None or total < best[0]:
-                best = (total, step.seconds, meas.seconds)
-        r["held"] = len(held)
-        r["peak_mb"][f"tracking {len(held)} held frames"] = _peak_mb()
-        r["direct_s"], r["step_s"], r["measure_s"] = (x / len(held) for x in best)
-
-        _log(f"label_frame on each of the {len(held)} held frames ...")
-        _reset_peak()
-        t0 = time.perf_counter()
-        for _, img in held:
-            label_frame(img, cam, kit, codes)
-        r["brute_s"] = (time.perf_counter() - t0) / len(held)
-        r["peak_mb"]["label_frame"] = _peak_mb()
+        held = [(k, img) for k, img in iter_test_frames(clip.video, clip.fmap, 0, min(hold, clip.n))]
+        figures, peak = _time_held(clip, labels, held)
+        r.update(figures, held=len(held))
+        r["peak_mb"][f"tracking {len(held)} held frames"] = peak
+        r["brute_s"], r["peak_mb"]["label_frame"] = _time_brute_force(clip, held)
         del held
 
-        _log("detect_blobs on every frame, for trackpy ...")
-        parts, det_s = [], 0.0
-        for k, img in iter_test_frames(video, fmap, 0, n):
-            t0 = time.perf_counter()
-            blobs = detect_blobs(img)
-            det_s += time.perf_counter() - t0
-            parts.append(pd.DataFrame({"x": blobs["u_px"], "y": blobs["v_px"], "frame": k}))
-        r["detect_s"] = det_s / n
-        dets = pd.concat(parts, ignore_index=True)
-        r["detections_per_frame"] = len(dets) / n
-        r["search_range_px"] = float(np.median(tcfg.gate * r["spacing_px"]))
-        r["trackpy"] = _bench_trackpy(dets, tracks, r["search_range_px"], n)
+        dets, r["detect_s"] = _detect_every_frame(clip)
+        r["detections_per_frame"] = len(dets) / clip.n
+        r["search_range_px"] = float(np.median(clip.tcfg.gate * r["spacing_px"]))
+        r["trackpy"] = _bench_trackpy(dets, r["tracks"], r["search_range_px"], clip.n)
         truth = pd.read_parquet(sim["observations"])
-        r["truth"], r["motion_px"] = _truth_errors(tracks, truth), _motion(truth)
+        r["truth"], r["motion_px"] = _truth_errors(r["tracks"], truth), _motion(truth)
     r["maxrss_mb"] = _process_peak_mb()
     return r
 
@@ -495,16 +579,18 @@ def _times(ratio: float) -> str:
     return f"{ratio:.0f} x" if ratio >= 10 else f"{ratio:.1f} x"
 
 
-def print_tracking(r: dict, benchmarks: Path) -> None:
+def _clip_summary(r: dict) -> list[str]:
+    """The lines that describe the benchmarked clip (:func:`bench_tracking`'s figures ``r``): its
+    video(s), the simulated test it comes from, the motion of its dots, the targets labelled and
+    tracked, the tracker's gate and the kernels' load time."""
     v, sim, n = r["video"], r["sim"], r["video"]["frames"]
     tracks = r["tracks"]
     ok = tracks["reason"] == ""
     per_frame = ok.groupby(tracks["frame"]).sum()
     med_step, max_step = r["motion_px"]
-    direct_ms = r["direct_s"] * 1e3
     t = r["truth"]
     h265 = f"; re-encoded as H.265 (libx265 crf {sim.crf}, veryfast), {r['codecs'].get('h265', 0):.1f} MB"
-    lines = [
+    return [
         f"Tracking benchmark on one video: {v['width']}x{v['height']} {v['codec']} (libx264 crf {sim.crf}, "
         f"veryfast, grey in yuv420p), {n} frames at {v['fps']:g} fps, {r['video_mb']:.1f} MB"
         + (h265 if "h265" in r["codecs"] else ""),
@@ -523,11 +609,21 @@ def print_tracking(r: dict, benchmarks: Path) -> None:
         f"  the tracker's compiled (numba) kernels loaded before the timings: {r['warmup_s']:.1f} s, once "
         "per process (compiled and cached on disk the first time)",
     ]
-    print("\n".join(lines))
-    print()
+
+
+def _codec_label(r: dict, codec: str) -> str:
+    """``"H.264: "`` before a figure when several codecs were benchmarked, else ``""``."""
+    return "" if len(r["codecs"]) == 1 else f"{_CODEC_NAMES[codec]}: "
+
+
+def _throughput_rows(r: dict) -> list[tuple[str, str, str, str]]:
+    """Table rows (:func:`_table`): decoding and the pipeline in frames/s per codec, and the
+    tracking cost per camera-frame beyond decoding (ms), measured and on frames held in memory."""
+    v, n = r["video"], r["video"]["frames"]
+    direct_ms = r["direct_s"] * 1e3
     rows, beyond = [("Throughput (same video, same run; best of the repeats)", "", "", "")], []
     for codec, dec in r["decode_s"].items():
-        pipe, name = r["pipeline_s"][codec], "" if len(r["codecs"]) == 1 else f"{_CODEC_NAMES[codec]}: "
+        pipe, name = r["pipeline_s"][codec], _codec_label(r, codec)
         rows += [
             (f"{name}decode only (iter_test_frames)", f"{n / dec:.1f}", "frames/s", f"{dec:.2f} s for {n}"
              " frames"),
@@ -554,9 +650,17 @@ def print_tracking(r: dict, benchmarks: Path) -> None:
         ),
         ("  of which measure_targets", f"{r['measure_s'] * 1e3:.1f}", "ms/frame", "inside _step"),
     ]
-    rows.append((f"Cost per processed frame, one a GOP ({r['gop']} frames here) on its keyframe", "", "", ""))
+    return rows
+
+
+def _fast_mode_rows(r: dict) -> list[tuple[str, str, str, str]]:
+    """Table rows (:func:`_table`): per codec, the cost per processed frame (ms) in fast mode and in
+    every-frame mode, with the ratio here and on the long test, and how far apart their centroids
+    are (px)."""
+    n = r["video"]["frames"]
+    rows = [(f"Cost per processed frame, one a GOP ({r['gop']} frames here) on its keyframe", "", "", "")]
     for codec, fast_s in r["fast_s"].items():
-        name = "" if len(r["codecs"]) == 1 else f"{_CODEC_NAMES[codec]}: "
+        name = _codec_label(r, codec)
         k = len(r["keys"][codec])
         every = r["pipeline_s"][codec] / k
         far, n_fast, n_every = r["fast_vs_every_px"][codec]
@@ -570,12 +674,20 @@ def print_tracking(r: dict, benchmarks: Path) -> None:
             (f"{name}  fast vs every-frame centroids", f"{far:.4f}", "px",
              f"largest distance; {n_fast} vs {n_every} reported"),
         ]  # fmt: skip
+    return rows
+
+
+def _projection_rows(r: dict) -> list[tuple[str, str, str, str]]:
+    """Table rows (:func:`_table`): the wall time (h) of the long test's tracking jobs
+    (``LONG_TEST_*``) on ``PROJECTION_CORES`` cores, every frame and in fast mode, from the first
+    codec's costs."""
+    v, n = r["video"], r["video"]["frames"]
     codec = next(iter(r["fast_s"]))
     per_frame = r["pipeline_s"][codec] / n
     per_processed = r["fast_s"][codec] / len(r["keys"][codec])
     long_test = f"{LONG_TEST_HOURS:g} h x {LONG_TEST_CAMERAS} cameras x {LONG_TEST_FPS:g} fps"
-    rows.append((f"Wall time for {long_test} at {v['width']}x{v['height']} ({_CODEC_NAMES[codec]}; "
-                 "tracking jobs only)", "", "", ""))  # fmt: skip
+    rows = [(f"Wall time for {long_test} at {v['width']}x{v['height']} ({_CODEC_NAMES[codec]}; "
+             "tracking jobs only)", "", "", "")]  # fmt: skip
     for cores in PROJECTION_CORES:
         rows += [
             (f"every frame, {cores} cores", f"{project_wall_hours(per_frame, None, cores):.1f}", "h",
@@ -584,7 +696,14 @@ def print_tracking(r: dict, benchmarks: Path) -> None:
              f"{project_wall_hours(per_processed, LONG_TEST_STEP_S, cores):.2f}", "h",
              f"{per_processed * 1e3:.0f} ms per processed frame (every-frame mode: as every frame)"),
         ]  # fmt: skip
-    rows += [
+    return rows
+
+
+def _alternative_rows(r: dict) -> list[tuple[str, str, str, str]]:
+    """Table rows (:func:`_table`): the alternatives to tracking, detecting and labelling every frame
+    (ms per frame) and trackpy's linking (ms per frame, and its links against our IDs)."""
+    n = r["video"]["frames"]
+    rows = [
         ("Brute force: detect and label every frame", "", "", ""),
         (
             "label_frame per frame",
@@ -602,35 +721,40 @@ def print_tracking(r: dict, benchmarks: Path) -> None:
     tp = r["trackpy"]
     if isinstance(tp, str):
         rows.append(("trackpy.link", "-", "", f"{tp} (pip install -e '.[bench]')"))
-    else:
+        return rows
+    rows.append(
+        (
+            f"trackpy {tp['version']}: link every frame's detect_blobs "
+            f"({r['detections_per_frame']:.0f} per frame)",
+            "",
+            "",
+            "",
+        )
+    )
+    for memory in (0, 3):
+        m = tp[memory]
         rows.append(
             (
-                f"trackpy {tp['version']}: link every frame's detect_blobs "
-                f"({r['detections_per_frame']:.0f} per frame)",
-                "",
-                "",
-                "",
+                f"trackpy.link, memory {memory}, search_range {r['search_range_px']:.1f} px",
+                f"{m['seconds'] * 1e3:.1f}",
+                "ms/frame",
+                f"{_times(m['seconds'] / r['direct_s'])} tracking (linking alone, no detection)",
             )
         )
-        for memory in (0, 3):
-            m = tp[memory]
-            rows.append(
-                (
-                    f"trackpy.link, memory {memory}, search_range {r['search_range_px']:.1f} px",
-                    f"{m['seconds'] * 1e3:.1f}",
-                    "ms/frame",
-                    f"{_times(m['seconds'] / r['direct_s'])} tracking (linking alone, no detection)",
-                )
+        rows.append(
+            (
+                f"  its links vs our IDs, memory {memory}",
+                f"{m['agree']}/{m['steps']}",
+                "agree",
+                f"{m['wrong']} wrong (onto another dot), {m['broken']} broken (track ends)",
             )
-            rows.append(
-                (
-                    f"  its links vs our IDs, memory {memory}",
-                    f"{m['agree']}/{m['steps']}",
-                    "agree",
-                    f"{m['wrong']} wrong (onto another dot), {m['broken']} broken (track ends)",
-                )
-            )
-    rows += [
+        )
+    return rows
+
+
+def _memory_rows(r: dict) -> list[tuple[str, str, str, str]]:
+    """Table rows (:func:`_table`): this process's peak memory (MB), over the run and per stage."""
+    rows = [
         ("Peak memory", "", "", ""),
         (
             "this process (ru_maxrss)",
@@ -641,13 +765,18 @@ def print_tracking(r: dict, benchmarks: Path) -> None:
     ]
     for stage, mb in r["peak_mb"].items():
         rows.append((f"  during {stage} (VmHWM)", f"{mb:.0f}", "MB", ""))
+    tp = r["trackpy"]
     if not isinstance(tp, str):
         for memory in (0, 3):
             rows.append(
                 (f"  during trackpy.link, memory {memory} (VmHWM)", f"{tp[memory]['peak_mb']:.0f}", "MB", "")
             )
-    print(_table(rows))
-    print()
+    return rows
+
+
+def _print_workflow_peaks(benchmarks: Path) -> None:
+    """Print the largest ``max_rss`` per rule of each workflow run in Snakemake's ``benchmarks``
+    folder (:func:`workflow_peaks`), or that there is none."""
     peaks = workflow_peaks(benchmarks)
     if not peaks:
         print(f"Workflow rules' peak memory ({benchmarks}/): no workflow run found")
@@ -661,6 +790,19 @@ def print_tracking(r: dict, benchmarks: Path) -> None:
         width = max(len(k) for k in rules)
         for rule, (mb, files) in sorted(rules.items()):
             print(f"    {rule:<{width}}  {mb:7.0f} MB  ({files})")
+
+
+def print_tracking(r: dict, benchmarks: Path) -> None:
+    """Print :func:`bench_tracking`'s figures ``r``: the clip, then one table (throughput, fast
+    mode, the long test's wall time, the alternatives, peak memory), then the workflow rules' peak
+    memory from Snakemake's ``benchmarks`` folder."""
+    print("\n".join(_clip_summary(r)))
+    print()
+    rows = [*_throughput_rows(r), *_fast_mode_rows(r), *_projection_rows(r), *_alternative_rows(r),
+            *_memory_rows(r)]  # fmt: skip
+    print(_table(rows))
+    print()
+    _print_workflow_peaks(benchmarks)
 
 
 def track_gate() -> float:
