@@ -80,6 +80,148 @@ def _ct_geometry(ct: dict) -> dict[str, float]:
     }
 
 
+def _ct_radii(geo: dict[str, float]) -> list[float]:
+    """The radii a CT is sampled on, in units of its centre-dot radius (``geo``:
+    :func:`_ct_geometry`), in this order: three in the centre dot (0..2), the white gap (3), the
+    code ring's (4 .. -2), the white surround (-1)."""
+    return [0.0, CT_CENTRE_FRACTION * 0.5, CT_CENTRE_FRACTION, geo["inner"], *geo["ring"], geo["outer"]]
+
+
+def _ct_candidates(blobs: pd.DataFrame, p: DetectParams) -> np.ndarray:
+    """Row positions (int) in ``blobs`` of the blobs that may be a CT's centre dot: large, round
+    and filled enough (``ct_min_area_px``, ``ct_min_roundness``, ``min_fill`` .. ``max_fill``)."""
+    return np.nonzero(
+        (blobs.area_px.to_numpy() >= p.ct_min_area_px)
+        & (blobs.roundness.to_numpy() >= p.ct_min_roundness)
+        & (blobs.fill.to_numpy() >= p.min_fill)
+        & (blobs.fill.to_numpy() <= p.max_fill)
+    )[0]
+
+
+def _sample_ct(
+    gray: np.ndarray, centre: np.ndarray, maps: np.ndarray, radii: list[float], ns: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """Grey levels around N candidate centre dots (``centre`` (N, 2) pixels, ``maps`` (N, 2, 2)
+    unit circle -> centre-dot ellipse) on circles of the printed design of ``radii`` (centre-dot
+    radii), ``ns`` samples each, counter-clockwise. Returns the levels (N, len(radii), ns) float32,
+    bilinear, -1 outside the image, and whether each sample lies inside the image (same shape)."""
+    phi = 2 * np.pi * (np.arange(ns) + 0.5) / ns
+    # counter-clockwise as seen from outside the surface = counter-clockwise on screen (v down)
+    circle = np.stack([np.cos(phi), -np.sin(phi)], axis=1)
+    pts = centre[:, None, None, :] + np.einsum(
+        "nij,rsj->nrsi", maps, np.asarray(radii)[:, None, None] * circle[None, :, :]
+    )
+    g = np.asarray(gray, np.float32)
+    mx = pts[..., 0].reshape(len(centre), -1).astype(np.float32)
+    my = pts[..., 1].reshape(len(centre), -1).astype(np.float32)
+    vals = cv2.remap(g, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=-1.0)
+    vals = vals.reshape(len(centre), len(radii), ns)
+    h, w = g.shape
+    inside = ((mx >= 0) & (mx <= w - 1) & (my >= 0) & (my <= h - 1)).reshape(vals.shape)
+    return vals, inside
+
+
+def _normalise(
+    vals: np.ndarray, inside: np.ndarray, p: DetectParams
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The samples of :func:`_sample_ct` (radii as :func:`_ct_radii`) scaled from each candidate's
+    ``black`` (median of its centre dot) to its ``white`` (median of its gap): 0 black, 1 white, NaN
+    outside the image. Returns them, ``black``, ``white`` (grey levels, (N,)) and ``ok`` (N,): the
+    centre dot and the gap inside the image with ``min_contrast``, the gap white
+    (``ct_min_white``), and ``ct_outer_white_fraction`` of the surround inside the image white."""
+    black = np.median(vals[:, :3].reshape(len(vals), -1), axis=1)
+    white = np.median(vals[:, 3], axis=1)
+    span = np.maximum(white - black, 1e-6)
+    norm = np.where(inside, (vals - black[:, None, None]) / span[:, None, None], np.nan)
+    ok = inside[:, :4].all(axis=(1, 2)) & (white - black >= p.min_contrast)  # centre dot and gap
+    ok &= norm[:, 3].min(axis=1) >= p.ct_min_white
+    surround = inside[:, -1].sum(axis=1)
+    ok &= (norm[:, -1] >= p.ct_min_white).sum(axis=1) >= p.ct_outer_white_fraction * np.maximum(surround, 1)
+    return norm, black, white, ok
+
+
+def _read_sectors(rings: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The ``n`` code sectors of N rings (``rings`` (N, radii, n * CT_SAMPLES_PER_SECTOR), scaled
+    0 black .. 1 white, NaN outside the image), read at the sub-sector phase that reads most
+    confidently: per sector the mean over the central half of it, at every radius.
+
+    Returns ``confidence`` (N,): the weakest sector's distance from the mid-level (0-1, relative
+    to half the contrast), -1 when no phase reads a ring dark or light across its whole width in
+    every sector, or reads fewer than ``CT_MIN_KNOWN_FRACTION`` of them; ``bits`` (N, n) uint8 (1:
+    dark); ``known`` (N, n) bool (the sector lies inside the image); and each sector's confidence
+    (N, n; inf where not known)."""
+    k = CT_SAMPLES_PER_SECTOR
+    nr = rings.shape[1]
+    best_conf = np.full(len(rings), -1.0)
+    best_bits = np.zeros((len(rings), n), np.uint8)
+    best_known = np.zeros((len(rings), n), bool)
+    sector_conf = np.zeros((len(rings), n))
+    for s in range(k):
+        rolled = np.roll(rings, -s, axis=2).reshape(len(rings), nr, n, k)
+        per_radius = rolled[..., k // 4 : k - k // 4].mean(axis=3)  # (N, radii, n), NaN: not all inside
+        known = np.isfinite(per_radius).all(axis=1)  # (N, n)
+        means = np.where(known, per_radius.mean(axis=1), 0.5)
+        bits = known & (means < 0.5)
+        # a printed sector is dark or light across the whole ring width
+        consistent = (((per_radius < 0.5) == bits[:, None, :]) | ~known[:, None, :]).all(axis=(1, 2))
+        enough = known.sum(axis=1) >= CT_MIN_KNOWN_FRACTION * n
+        weakest = np.where(known, 2 * np.abs(means - 0.5), np.inf).min(axis=1)
+        conf = np.where(consistent & enough, weakest, -1.0)
+        better = conf > best_conf
+        best_conf[better] = conf[better]
+        best_bits[better] = bits[better].astype(np.uint8)
+        best_known[better] = known[better]
+        sector_conf[better] = np.where(known[better], 2 * np.abs(means[better] - 0.5), np.inf)
+    return best_conf, best_bits, best_known, sector_conf
+
+
+def _match_code(
+    bits: np.ndarray, known_sectors: np.ndarray, sector_conf: np.ndarray, book: CodeBook, p: DetectParams
+) -> tuple[int, int] | None:
+    """The CT id and the sectors corrected (0 or 1) of one ring read by :func:`_read_sectors`
+    (``bits``, ``known_sectors``, ``sector_conf``: (n,)), or None. A whole ring matches a code
+    within ``ct_max_corrected`` sectors, with every other code at least two sectors farther, and
+    a corrected sector must be the one read least confidently; a ring cut by the image border
+    matches exactly on the sectors read, with every other code ``CT_PARTIAL_MARGIN`` or more
+    sectors away there."""
+    n = book.sectors
+    word = int(sum(int(b) << j for j, b in enumerate(bits)))
+    read = int(known_sectors.sum())
+    known = None if read == n else int(sum(1 << j for j in np.nonzero(known_sectors)[0]))
+    tid, dist, matched, other = book.nearest(word, known)
+    if known is None and (dist > p.ct_max_corrected or other <= dist + 1):
+        return None
+    if known is not None and (dist > 0 or other < CT_PARTIAL_MARGIN):
+        return None
+    if dist == 1:
+        flipped = int(np.log2(word ^ matched))
+        if flipped != int(np.argmin(sector_conf)):
+            return None
+    return tid, dist
+
+
+def _drop_code_pieces(
+    out: pd.DataFrame, maps: np.ndarray, blob_index: pd.Index, extent: float
+) -> pd.DataFrame:
+    """The CTs of ``out`` (most confident first) that lie inside no more confident one's label: a
+    CT's label holds nothing else, so a candidate there is a piece of its code. ``maps``: the
+    centre-dot ellipse maps of the candidates whose ``blobs`` rows are ``blob_index``; ``extent``:
+    the label's radius in centre-dot radii."""
+    centres = out[["u_px", "v_px"]].to_numpy()
+    pos = {b: i for i, b in enumerate(blob_index)}
+    keep = []
+    for a in range(len(out)):
+        ma = maps[pos[out.blob.iloc[a]]]
+        inside = [
+            np.linalg.norm(np.linalg.solve(ma, centres[b] - centres[a])) < extent
+            or np.linalg.norm(np.linalg.solve(maps[pos[out.blob.iloc[b]]], centres[a] - centres[b])) < extent
+            for b in keep
+        ]
+        if not any(inside):
+            keep.append(a)
+    return out.iloc[keep]
+
+
 def decode_coded_targets(
     gray: np.ndarray, blobs: pd.DataFrame, codes: dict[int, int], ct: dict, params: DetectParams | None = None
 ) -> pd.DataFrame:
@@ -102,101 +244,31 @@ def decode_coded_targets(
     p = params or DetectParams()
     n = int(ct["sectors"])
     geo = _ct_geometry(ct)
-    cand = np.nonzero(
-        (blobs.area_px.to_numpy() >= p.ct_min_area_px)
-        & (blobs.roundness.to_numpy() >= p.ct_min_roundness)
-        & (blobs.fill.to_numpy() >= p.min_fill)
-        & (blobs.fill.to_numpy() <= p.max_fill)
-    )[0]
+    cand = _ct_candidates(blobs, p)
     cols = ["id", "blob", "u_px", "v_px", "confidence", "distance", "white", "black", "extent_px", "sectors"]
     if len(cand) == 0:
         return pd.DataFrame(columns=cols)
     sub = blobs.iloc[cand]
     maps = ellipse_maps(sub)  # unit circle -> centre dot ellipse
     centre = sub[["u_px", "v_px"]].to_numpy()
-    ns = n * CT_SAMPLES_PER_SECTOR
-    phi = 2 * np.pi * (np.arange(ns) + 0.5) / ns
-    # counter-clockwise as seen from outside the surface = counter-clockwise on screen (v down)
-    circle = np.stack([np.cos(phi), -np.sin(phi)], axis=1)
-    radii = [0.0, CT_CENTRE_FRACTION * 0.5, CT_CENTRE_FRACTION, geo["inner"], *geo["ring"], geo["outer"]]
-    pts = centre[:, None, None, :] + np.einsum(
-        "nij,rsj->nrsi", maps, np.asarray(radii)[:, None, None] * circle[None, :, :]
-    )
-    g = np.asarray(gray, np.float32)
-    mx = pts[..., 0].reshape(len(cand), -1).astype(np.float32)
-    my = pts[..., 1].reshape(len(cand), -1).astype(np.float32)
-    vals = cv2.remap(g, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=-1.0)
-    vals = vals.reshape(len(cand), len(radii), ns)
-    h, w = g.shape
-    inside = ((mx >= 0) & (mx <= w - 1) & (my >= 0) & (my <= h - 1)).reshape(vals.shape)
-    black = np.median(vals[:, :3].reshape(len(cand), -1), axis=1)
-    white = np.median(vals[:, 3], axis=1)
-    span = np.maximum(white - black, 1e-6)
-    norm = np.where(inside, (vals - black[:, None, None]) / span[:, None, None], np.nan)
-    ok = inside[:, :4].all(axis=(1, 2)) & (white - black >= p.min_contrast)  # centre dot and gap
-    ok &= norm[:, 3].min(axis=1) >= p.ct_min_white
-    surround = inside[:, -1].sum(axis=1)
-    ok &= (norm[:, -1] >= p.ct_min_white).sum(axis=1) >= p.ct_outer_white_fraction * np.maximum(surround, 1)
-    rings = norm[:, 4:-1]  # (N, radii, ns), NaN outside the image
-    # sector means over the central half of each sector, for each sub-sector phase
-    k = CT_SAMPLES_PER_SECTOR
-    nr = rings.shape[1]
-    best_conf = np.full(len(cand), -1.0)
-    best_bits = np.zeros((len(cand), n), np.uint8)
-    best_known = np.zeros((len(cand), n), bool)
-    sector_conf = np.zeros((len(cand), n))
-    for s in range(k):
-        rolled = np.roll(rings, -s, axis=2).reshape(len(cand), nr, n, k)
-        per_radius = rolled[..., k // 4 : k - k // 4].mean(axis=3)  # (N, radii, n), NaN: not all inside
-        known = np.isfinite(per_radius).all(axis=1)  # (N, n)
-        means = np.where(known, per_radius.mean(axis=1), 0.5)
-        bits = known & (means < 0.5)
-        # a printed sector is dark or light across the whole ring width
-        consistent = (((per_radius < 0.5) == bits[:, None, :]) | ~known[:, None, :]).all(axis=(1, 2))
-        enough = known.sum(axis=1) >= CT_MIN_KNOWN_FRACTION * n
-        weakest = np.where(known, 2 * np.abs(means - 0.5), np.inf).min(axis=1)
-        conf = np.where(consistent & enough, weakest, -1.0)
-        better = conf > best_conf
-        best_conf[better] = conf[better]
-        best_bits[better] = bits[better].astype(np.uint8)
-        best_known[better] = known[better]
-        sector_conf[better] = np.where(known[better], 2 * np.abs(means[better] - 0.5), np.inf)
+    vals, inside = _sample_ct(gray, centre, maps, _ct_radii(geo), n * CT_SAMPLES_PER_SECTOR)
+    norm, black, white, ok = _normalise(vals, inside, p)
+    best_conf, best_bits, best_known, sector_conf = _read_sectors(norm[:, 4:-1], n)
     ok &= best_conf >= p.ct_min_confidence
     book = CodeBook.from_codes(codes, n)
     rows = []
     for i in np.nonzero(ok)[0]:
-        word = int(sum(int(b) << j for j, b in enumerate(best_bits[i])))
-        read = int(best_known[i].sum())
-        known = None if read == n else int(sum(1 << j for j in np.nonzero(best_known[i])[0]))
-        tid, dist, matched, other = book.nearest(word, known)
-        if known is None and (dist > p.ct_max_corrected or other <= dist + 1):
+        match = _match_code(best_bits[i], best_known[i], sector_conf[i], book, p)
+        if match is None:
             continue
-        if known is not None and (dist > 0 or other < CT_PARTIAL_MARGIN):
-            continue
-        if dist == 1:
-            flipped = int(np.log2(word ^ matched))
-            if flipped != int(np.argmin(sector_conf[i])):
-                continue
+        tid, dist = match
         rows.append(dict(
             id=tid, blob=int(sub.index[i]), u_px=centre[i, 0], v_px=centre[i, 1],
             confidence=float(best_conf[i]), distance=dist, white=float(white[i]),
-            black=float(black[i]), extent_px=float(np.linalg.norm(maps[i], 2) * geo["extent"]), sectors=read,
+            black=float(black[i]), extent_px=float(np.linalg.norm(maps[i], 2) * geo["extent"]),
+            sectors=int(best_known[i].sum()),
         ))  # fmt: skip
     out = pd.DataFrame(rows, columns=cols)
     dup = out.id.duplicated(keep=False)
     out = out[~dup].sort_values("confidence", ascending=False)
-    # a CT's label holds nothing else: drop candidates inside a more confident CT (code pieces)
-    centres = out[["u_px", "v_px"]].to_numpy()
-    pos = {b: i for i, b in enumerate(sub.index)}
-    keep = []
-    for a in range(len(out)):
-        ma = maps[pos[out.blob.iloc[a]]]
-        inside = [
-            np.linalg.norm(np.linalg.solve(ma, centres[b] - centres[a])) < geo["extent"]
-            or np.linalg.norm(np.linalg.solve(maps[pos[out.blob.iloc[b]]], centres[a] - centres[b]))
-            < geo["extent"]
-            for b in keep
-        ]
-        if not any(inside):
-            keep.append(a)
-    return out.iloc[keep].sort_values("id").reset_index(drop=True)
+    return _drop_code_pieces(out, maps, sub.index, geo["extent"]).sort_values("id").reset_index(drop=True)

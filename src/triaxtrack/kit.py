@@ -88,57 +88,54 @@ def surface_by_name(design: dict) -> dict[str, dict]:
 
 
 # ---------------------------------------------------------------- the design table
-def target_table(design: dict) -> pd.DataFrame:
-    """One row per target (paper Table 1), sorted by ID.
-
-    Columns: ``id`` (int), ``kind`` ('coded' | 'dot'), ``surface``, ``theta_rad`` and ``z_mm``
-    (centre, cell frame, undeformed; membrane in material coordinates), ``diameter_mm`` (a CT's
-    outer code-ring diameter), ``group`` (stripe name), ``large`` (bool, the larger dots),
-    ``row`` and ``col`` (membrane grid, 0 elsewhere).
-    """
-    rows: list[dict] = []
-    sp, ped, ct = design["specimen"], design["pedestal_targets"], design["coded_target"]
-    if ped["theta0"] != 0:
-        raise ValueError("pedestal_targets.theta0 must be 0: CT 17 defines +x of the cell frame")
-    h = sp["height"]
-    ct_diam = 2 * ct["ring_outer_radius"]
+def _pedestal_ct_rows(design: dict) -> list[dict]:
+    """The pedestal CTs' rows of :func:`target_table`: each stripe's CTs evenly around the
+    pedestal from theta 0, ``z_from_face`` below the bottom face or above the top one (mm)."""
+    h = design["specimen"]["height"]
+    ped = design["pedestal_targets"]
+    ct_diam = 2 * design["coded_target"]["ring_outer_radius"]
+    rows = []
     for st in ped["stripes"]:
         face = 0.0 if st["surface"] == "pedestal_bottom" else h
         z = face - st["z_from_face"] if st["surface"] == "pedestal_bottom" else face + st["z_from_face"]
         for i in range(st["count"]):
             th = np.deg2rad(ped["theta0"]) + 2 * np.pi * i / st["count"]
-            rows.append(
-                dict(
-                    id=st["first_id"] + i,
-                    kind="coded",
-                    surface=st["surface"],
-                    theta_rad=th,
-                    z_mm=z,
-                    diameter_mm=ct_diam,
-                    group=st["name"],
-                )
-            )
+            rows.append(dict(id=st["first_id"] + i, kind="coded", surface=st["surface"], theta_rad=th, z_mm=z,
+                             diameter_mm=ct_diam, group=st["name"]))  # fmt: skip
+    return rows
+
+
+def _cell_ct_theta(cell: dict) -> dict[int, float]:
+    """The angle (rad, cell frame, not wrapped) of every cell-wall CT by ID, as
+    :func:`_cell_ct_rows` places them: the cell's dots are placed from their CT's."""
+    return {
+        st["first_id"] + i: np.deg2rad(cell["theta0"]) + 2 * np.pi * i / st["count"]
+        for st in cell["ct_stripes"]
+        for i in range(st["count"])
+    }
+
+
+def _cell_ct_rows(design: dict) -> list[dict]:
+    """The cell-wall CTs' rows of :func:`target_table`: each CT stripe's CTs evenly around the
+    cell from ``theta0``, at the stripe's ``z`` (mm)."""
     cell = design["cell_targets"]
-    ct_theta: dict[int, float] = {}
-    ct_z: dict[str, float] = {}
+    ct_diam = 2 * design["coded_target"]["ring_outer_radius"]
+    rows = []
     for st in cell["ct_stripes"]:
-        ct_z[st["name"]] = st["z"]
         for i in range(st["count"]):
             th = np.deg2rad(cell["theta0"]) + 2 * np.pi * i / st["count"]
-            ct_theta[st["first_id"] + i] = th
-            rows.append(
-                dict(
-                    id=st["first_id"] + i,
-                    kind="coded",
-                    surface="cell_outer",
-                    theta_rad=th,
-                    z_mm=st["z"],
-                    diameter_mm=ct_diam,
-                    group=st["name"],
-                )
-            )
+            rows.append(dict(id=st["first_id"] + i, kind="coded", surface="cell_outer", theta_rad=th,
+                             z_mm=st["z"], diameter_mm=ct_diam, group=st["name"]))  # fmt: skip
+    return rows
+
+
+def _cell_dot_rows(cell: dict, ct_theta: dict[int, float]) -> list[dict]:
+    """The cell-wall dot stripes' rows of :func:`target_table`: ``dots_per_ct`` dots from each CT's
+    angle on (the first one large), ``dot_offset`` mm below its CT stripe, IDs by the paper's Eq. 1.
+    ValueError for a stripe whose count is not ``dots_per_ct`` x its CT stripe's."""
     per = cell["dots_per_ct"]
     stripes = {s["name"]: s for s in cell["ct_stripes"]}
+    rows = []
     for ds in cell["dot_stripes"]:
         cs = stripes[ds["ct_stripe"]]
         if ds["count"] != per * cs["count"]:
@@ -150,16 +147,32 @@ def target_table(design: dict) -> pd.DataFrame:
             for j in range(per):
                 rows.append(dict(
                     id=per * c_id - eq1 + j, kind="dot", surface="cell_outer",
-                    theta_rad=ct_theta[c_id] + j * step, z_mm=ct_z[cs["name"]] - cell["dot_offset"],
+                    theta_rad=ct_theta[c_id] + j * step, z_mm=cs["z"] - cell["dot_offset"],
                     diameter_mm=cell["large_dot_diameter"] if j == 0 else cell["small_dot_diameter"],
                     group=ds["name"], large=j == 0))  # fmt: skip
+    return rows
+
+
+def _longitudinal_rows(cell: dict, ct_theta: dict[int, float]) -> list[dict]:
+    """The longitudinal stripes' rows of :func:`target_table`: each stripe's dots at its CT's angle,
+    evenly from ``longitudinal_z_top`` down to ``longitudinal_z_bottom`` (mm)."""
     zt, zb = cell["longitudinal_z_top"], cell["longitudinal_z_bottom"]
+    rows = []
     for ls in cell["longitudinal_stripes"]:
         for i in range(ls["count"]):
             rows.append(dict(id=ls["first_id"] + i, kind="dot", surface="cell_outer",
                              theta_rad=ct_theta[ls["ct"]], z_mm=zt + (zb - zt) * i / (ls["count"] - 1),
                              diameter_mm=cell["longitudinal_dot_diameter"], group=ls["name"]))  # fmt: skip
+    return rows
+
+
+def _membrane_rows(design: dict) -> list[dict]:
+    """The membrane grid's rows of :func:`target_table`: row r (1 at the top) and column c (1 at
+    ``theta0``) at material height ``h (1 - (r - 0.5) / rows)`` mm, every ``large_step``-th row
+    and column from ``large_first`` a larger dot."""
+    h = design["specimen"]["height"]
     m = design["membrane"]
+    rows = []
     for r in range(1, m["rows"] + 1):
         for c in range(1, m["columns"] + 1):
             on_grid = (r - m["large_first"]) % m["large_step"] == 0 and (c - m["large_first"]) % m[
@@ -172,6 +185,28 @@ def target_table(design: dict) -> pd.DataFrame:
                 z_mm=h * (1 - (r - 0.5) / m["rows"]),
                 diameter_mm=m["large_dot_diameter"] if large else m["small_dot_diameter"],
                 group="membrane", large=large, row=r, col=c))  # fmt: skip
+    return rows
+
+
+def target_table(design: dict) -> pd.DataFrame:
+    """One row per target (paper Table 1), sorted by ID.
+
+    Columns: ``id`` (int), ``kind`` ('coded' | 'dot'), ``surface``, ``theta_rad`` and ``z_mm``
+    (centre, cell frame, undeformed; membrane in material coordinates), ``diameter_mm`` (a CT's
+    outer code-ring diameter), ``group`` (stripe name), ``large`` (bool, the larger dots),
+    ``row`` and ``col`` (membrane grid, 0 elsewhere).
+    """
+    if design["pedestal_targets"]["theta0"] != 0:
+        raise ValueError("pedestal_targets.theta0 must be 0: CT 17 defines +x of the cell frame")
+    cell = design["cell_targets"]
+    ct_theta = _cell_ct_theta(cell)
+    rows = [
+        *_pedestal_ct_rows(design),
+        *_cell_ct_rows(design),
+        *_cell_dot_rows(cell, ct_theta),
+        *_longitudinal_rows(cell, ct_theta),
+        *_membrane_rows(design),
+    ]
     df = pd.DataFrame(rows)
     df["large"] = df["large"].fillna(False).astype(bool)
     df[["row", "col"]] = df[["row", "col"]].fillna(0).astype(np.int64)

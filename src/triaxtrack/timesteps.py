@@ -181,6 +181,90 @@ from the projections of their first-frame points, whether the camera has moved, 
 was posed again there."""
 
 
+def _camera_quality(residuals: pd.DataFrame, reference: dict) -> dict[str, dict]:
+    """Per camera: the mean reprojection error (pixels) of its observations used, how many were
+    used and dropped, and its reference-frame figures (``reference["per_camera"]``)."""
+    per_camera = {}
+    for name, g in residuals.groupby("camera"):
+        u = g["used"].astype(bool)
+        e = np.hypot(g.loc[u, "du_px"], g.loc[u, "dv_px"])
+        per_camera[str(name)] = {
+            "mean_reprojection_px": float(e.mean()) if len(e) else float("nan"),
+            "observations_used": int(u.sum()),
+            "observations_dropped": int((~u).sum()),
+            "reference_frame": reference.get("per_camera", {}).get(name, {}),
+        }
+    return per_camera
+
+
+def _frame_quality(
+    points: pd.DataFrame, used: pd.DataFrame, err: pd.Series, rep: pd.DataFrame, membrane_ids: np.ndarray
+) -> list[dict]:
+    """Per processed frame of ``points``: its time (s), the targets tracked (``rep``: reported
+    ``TRACKS`` rows) and reconstructed, the membrane dots reconstructed (by 3 rays or more), the
+    mean reprojection error (pixels; ``err`` of the ``used`` residuals) and the membrane points'
+    median ``sigma_mm``."""
+    frames = []
+    for frame, pts in points.groupby("frame"):
+        mem = pts[pts["id"].isin(membrane_ids)]
+        e = err[used["frame"] == frame]
+        frames.append({
+            "frame": int(frame),
+            "time_s": float(pts["time_s"].iloc[0]),
+            "targets_tracked": int(rep.loc[rep["frame"] == frame, "id"].nunique()),
+            "targets_reconstructed": int(len(pts)),
+            "membrane_dots": int(len(membrane_ids)),
+            "membrane_dots_reconstructed": int(len(mem)),
+            "membrane_dots_3_rays": int((mem["n_rays"] >= 3).sum()),
+            "mean_reprojection_px": float(e.mean()) if len(e) else float("nan"),
+            "median_sigma_mm": float(mem["sigma_mm"].median()) if len(mem) else float("nan"),
+        })  # fmt: skip
+    return frames
+
+
+def _tracking_quality(points: pd.DataFrame, tracks: pd.DataFrame, membrane_ids: np.ndarray) -> dict:
+    """The tracking's figures: camera-frames, observations reported and dropped (by reason), the
+    membrane dots reconstructed at the first processed frame and kept to the last, and the
+    camera-frames that lost targets wholesale (:func:`large_losses`)."""
+    first, last = (points["frame"].min(), points["frame"].max()) if len(points) else (0, 0)
+    mem0 = set(points.loc[(points["frame"] == first) & points["id"].isin(membrane_ids), "id"])
+    mem1 = set(points.loc[(points["frame"] == last) & points["id"].isin(membrane_ids), "id"])
+    losses = tracks.loc[tracks["reason"] != "", "reason"].value_counts()
+    return {
+        "camera_frames": int(tracks[["camera", "frame"]].drop_duplicates().shape[0]),
+        "observations_reported": int((tracks["reason"] == "").sum()),
+        "observations_dropped": {str(k): int(v) for k, v in losses.items()},
+        "membrane_dots_first_frame": len(mem0),
+        "membrane_dots_kept_to_last_frame": len(mem0 & mem1),
+        "membrane_kept_share": len(mem0 & mem1) / len(mem0) if mem0 else float("nan"),
+        "large_losses": [
+            {
+                "camera": str(r.camera),
+                "frame": int(r.frame),
+                "reported": int(r.reported),
+                "share_of_median": round(float(r.share), 3),
+            }
+            for r in large_losses(tracks).itertuples(index=False)
+        ],
+    }
+
+
+def _motion_quality(motion: pd.DataFrame) -> dict:
+    """The camera-motion check (``MOTION`` rows): the largest drift (pixels), overall and per
+    camera, and per camera that moved its first moved frame, the frames it was posed again at
+    and those left out."""
+    moved = motion[motion["moved"].astype(bool)]
+    reposed = moved["reposed"].astype(bool).groupby(moved["camera"]).sum()
+    left_out = moved["camera"].value_counts() - reposed
+    return {
+        "max_drift_px": float(motion["drift_px"].max()) if len(motion) else float("nan"),
+        "per_camera_max_drift_px": {str(c): float(g.max()) for c, g in motion.groupby("camera")["drift_px"]},
+        "moved": {str(c): int(g["frame"].min()) for c, g in moved.groupby("camera")},
+        "reposed_frames": {str(c): int(n) for c, n in reposed.items()},
+        "left_out_frames": {str(c): int(n) for c, n in left_out.items()},
+    }
+
+
 def timestep_quality(
     reference: dict,
     points: pd.DataFrame,
@@ -198,68 +282,15 @@ def timestep_quality(
     of the test (``{camera: why}``, e.g. an unreadable video)."""
     used = residuals[residuals["used"].astype(bool)]
     err = np.hypot(used["du_px"], used["dv_px"])
-    per_camera = {}
-    for name, g in residuals.groupby("camera"):
-        u = g["used"].astype(bool)
-        e = np.hypot(g.loc[u, "du_px"], g.loc[u, "dv_px"])
-        per_camera[str(name)] = {
-            "mean_reprojection_px": float(e.mean()) if len(e) else float("nan"),
-            "observations_used": int(u.sum()),
-            "observations_dropped": int((~u).sum()),
-            "reference_frame": reference.get("per_camera", {}).get(name, {}),
-        }
-    rep = tracks[tracks["reason"] == ""]
-    frames = []
-    for frame, pts in points.groupby("frame"):
-        mem = pts[pts["id"].isin(membrane_ids)]
-        e = err[used["frame"] == frame]
-        frames.append({
-            "frame": int(frame),
-            "time_s": float(pts["time_s"].iloc[0]),
-            "targets_tracked": int(rep.loc[rep["frame"] == frame, "id"].nunique()),
-            "targets_reconstructed": int(len(pts)),
-            "membrane_dots": int(len(membrane_ids)),
-            "membrane_dots_reconstructed": int(len(mem)),
-            "membrane_dots_3_rays": int((mem["n_rays"] >= 3).sum()),
-            "mean_reprojection_px": float(e.mean()) if len(e) else float("nan"),
-            "median_sigma_mm": float(mem["sigma_mm"].median()) if len(mem) else float("nan"),
-        })  # fmt: skip
-    first, last = (points["frame"].min(), points["frame"].max()) if len(points) else (0, 0)
-    mem0 = set(points.loc[(points["frame"] == first) & points["id"].isin(membrane_ids), "id"])
-    mem1 = set(points.loc[(points["frame"] == last) & points["id"].isin(membrane_ids), "id"])
-    losses = tracks.loc[tracks["reason"] != "", "reason"].value_counts()
-    moved = motion[motion["moved"].astype(bool)]
-    reposed = moved["reposed"].astype(bool).groupby(moved["camera"]).sum()
-    left_out = moved["camera"].value_counts() - reposed
     return {
         **{k: v for k, v in reference.items() if k not in ("per_camera", "frames", "mean_reprojection_px")},
         "mean_reprojection_px": float(err.mean()) if len(err) else float("nan"),
         "reference_frame": {k: reference.get(k) for k in ("mean_reprojection_px", "frames")},
-        "per_camera": per_camera,
+        "per_camera": _camera_quality(residuals, reference),
         "cameras_left_out": dict(cameras_left_out or {}),
-        "frames": frames,
-        "tracking": {
-            "camera_frames": int(tracks[["camera", "frame"]].drop_duplicates().shape[0]),
-            "observations_reported": int(len(rep)),
-            "observations_dropped": {str(k): int(v) for k, v in losses.items()},
-            "membrane_dots_first_frame": len(mem0),
-            "membrane_dots_kept_to_last_frame": len(mem0 & mem1),
-            "membrane_kept_share": len(mem0 & mem1) / len(mem0) if mem0 else float("nan"),
-            "large_losses": [
-                {"camera": str(r.camera), "frame": int(r.frame), "reported": int(r.reported),
-                 "share_of_median": round(float(r.share), 3)}
-                for r in large_losses(tracks).itertuples(index=False)
-            ],  # fmt: skip
-        },
-        "camera_motion": {
-            "max_drift_px": float(motion["drift_px"].max()) if len(motion) else float("nan"),
-            "per_camera_max_drift_px": {
-                str(c): float(g.max()) for c, g in motion.groupby("camera")["drift_px"]
-            },
-            "moved": {str(c): int(g["frame"].min()) for c, g in moved.groupby("camera")},
-            "reposed_frames": {str(c): int(n) for c, n in reposed.items()},
-            "left_out_frames": {str(c): int(n) for c, n in left_out.items()},
-        },
+        "frames": _frame_quality(points, used, err, tracks[tracks["reason"] == ""], membrane_ids),
+        "tracking": _tracking_quality(points, tracks, membrane_ids),
+        "camera_motion": _motion_quality(motion),
         "handovers": {
             "checked": len(handovers),
             "disagreements": int(sum(h.get("disagree", 0) for h in handovers)),

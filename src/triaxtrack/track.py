@@ -305,30 +305,37 @@ def _mass_ok(mass, smass, ref, sref, fraction: float, scatter: float) -> np.ndar
     return np.abs(mass / ref - 1) <= np.maximum(fraction, MASS_NOISE_K * sigma)
 
 
-def _step(state: _State, gray: np.ndarray | None, cfg: TrackingConfig, first: bool) -> tuple:
-    """Track one frame: returns (uv (n, 2), area (n,), sigma_px (n,), reason (n,)) and advances
-    the state."""
+def _extrapolate(state: _State) -> tuple:
+    """A frame with no picture: the predictions move on by their velocities, nothing is measured
+    (``not_recorded``) and ``blind`` stays as it is (no failed measurement). As :func:`_step`."""
     n = len(state.ids)
-    if gray is None:  # no picture: extrapolate; not a failed measurement, so blind stays as it is
-        state.pred = state.pred + state.last_vel
-        state.since = state.since + 1
-        nan = np.full(n, np.nan)
-        return np.c_[nan, nan], np.zeros(n), nan, np.full(n, "not_recorded", dtype=object)
-    pred = state.pred
-    # targets left out of the chunk at its first frame are not measured again (NaN: 'lost')
-    probe = pred if first else np.where(np.isfinite(state.ref_mass)[:, None], pred, np.nan)
-    meas = measure_targets(gray, probe, state.radius, cfg)
-    if not first:  # the prediction moved by the motion the frame shows
-        pred, meas = _corrected_prediction(state, gray, cfg, pred, meas)
-    uv, mass, smass, reason = meas.uv, meas.mass, meas.sigma_mass, meas.reason.copy()
-    if first:  # the tracker's centroid must agree with the detection's, or the target is left out
-        agree = (reason == "") & (np.linalg.norm(uv - pred, axis=1) <= cfg.first_agreement_px)
-        reason[(reason == "") & ~agree] = "disagrees"
-        state.ref_uv = np.where(agree[:, None], uv, np.nan)
-        state.ref_mass = np.where(agree, mass, np.nan)
-        state.ref_smass = np.where(agree, smass, 0.0)
-        state.last_mass, state.last_smass = state.ref_mass, state.ref_smass
-    reason[~np.isfinite(state.ref_mass)] = "disagrees"
+    state.pred = state.pred + state.last_vel
+    state.since = state.since + 1
+    nan = np.full(n, np.nan)
+    return np.c_[nan, nan], np.zeros(n), nan, np.full(n, "not_recorded", dtype=object)
+
+
+def _set_reference(
+    state: _State, meas: WindowMeasure, pred: np.ndarray, reason: np.ndarray, cfg: TrackingConfig
+) -> None:
+    """At the chunk's first frame a target whose centroid (``meas``) is farther than
+    ``first_agreement_px`` from the identification's (``pred``) is left out of the chunk
+    (``disagrees`` in ``reason``); the others' centroids and normalised masses become the reference."""
+    agree = (reason == "") & (np.linalg.norm(meas.uv - pred, axis=1) <= cfg.first_agreement_px)
+    reason[(reason == "") & ~agree] = "disagrees"
+    state.ref_uv = np.where(agree[:, None], meas.uv, np.nan)
+    state.ref_mass = np.where(agree, meas.mass, np.nan)
+    state.ref_smass = np.where(agree, meas.sigma_mass, 0.0)
+    state.last_mass, state.last_smass = state.ref_mass, state.ref_smass
+
+
+def _check_measured(
+    state: _State, meas: WindowMeasure, pred: np.ndarray, reason: np.ndarray, cfg: TrackingConfig
+) -> None:
+    """Drop (in ``reason``) the measured targets whose normalised mass changed too much since the
+    chunk's first frame or the last frame (``shape``), whose centroid (``meas``) is beyond the gate
+    from ``pred`` (``jump``), and two targets on one blob (``ambiguous``: both); module docstring."""
+    uv, mass, smass = meas.uv, meas.mass, meas.sigma_mass
     measured = reason == ""
     with np.errstate(invalid="ignore", divide="ignore"):
         fresh = measured & (state.blind == 0)
@@ -345,11 +352,18 @@ def _step(state: _State, gray: np.ndarray | None, cfg: TrackingConfig, first: bo
         close = d[:, 1] < cfg.min_separation * state.spacing[cand]
         reason[cand[close]] = "ambiguous"
         reason[cand[nearest[close, 1]]] = "ambiguous"
-    # The flow check. Only targets reported in the previous frame (or before a blank one, see
-    # below) vouch for their neighbours at first: targets found again must not confirm
-    # one another (a whole region can lock one dot over at once); each one that passes then
-    # vouches in turn, so confirmation spreads from the steadily tracked targets into a region
-    # that reappears.
+
+
+def _check_flow(
+    state: _State, uv: np.ndarray, reason: np.ndarray, cfg: TrackingConfig
+) -> tuple[np.ndarray, np.ndarray]:
+    """Drop (in ``reason``) the targets whose displacement since the chunk's first frame departs by
+    more than ``max_flow_residual_px`` from their neighbours' affine motion (``drift``), and those
+    found again that no reported neighbour vouches for (``unconfirmed``). Only targets reported in
+    the previous frame (or before a blank one) vouch at first: targets found again must not confirm
+    one another (a whole region can lock one dot over at once); each one that passes then vouches
+    in turn, so confirmation spreads from the steadily tracked targets into a region that
+    reappears. Returns the neighbours' predicted displacements (n, 2) and where there is one (n,)."""
     ok = reason == ""
     disp = uv - state.ref_uv
     vouch = ok & (state.blind == 0)
@@ -380,12 +394,21 @@ def _step(state: _State, gray: np.ndarray | None, cfg: TrackingConfig, first: bo
         valid |= check
     reason[drift] = "drift"
     reason[pending] = "unconfirmed"  # found again, but no reported neighbours can vouch for it
-    ok = reason == ""
-    # A blank frame (a glitched, blanked or over-exposed picture: no ink where almost every
-    # target should be) in steady tracking is a failure of the picture, not of each target:
-    # like a frame not recorded it does not count against them, so those reported before it
-    # still vouch after it. A frame whose windows catch ink in the wrong places is not blank:
-    # its predictions may be wrong, and blind extrapolation would carry them on.
+    return flow, valid
+
+
+def _advance(state: _State, meas: WindowMeasure, pred: np.ndarray, reason: np.ndarray, ok: np.ndarray,
+             flow: np.ndarray, valid: np.ndarray, first: bool) -> None:  # fmt: skip
+    """Advance the state past a measured frame (``ok``: reported; else ``reason``): the reported
+    targets' last position, mass and velocity (pixels per frame, smoothed once known), the frames
+    since each was reported, and the next predictions: constant velocity, a dropped target moved
+    with its neighbours (``flow`` where ``valid``), or else blind. A blank frame (a glitched,
+    blanked or over-exposed picture: no ink where almost every target should be) in steady
+    tracking is a failure of the picture, not of each target: like a frame not recorded it does
+    not count against them, so those reported before it still vouch after it. A frame whose
+    windows catch ink in the wrong places is not blank: its predictions may be wrong, and blind
+    extrapolation would carry them on."""
+    n, uv = len(state.ids), meas.uv
     live = max(np.isfinite(state.ref_mass).sum(), 1)
     excused = (reason == "lost").sum() >= BLANK_SHARE * live and state.steady >= STEADY_FRAMES
     state.steady = state.steady + 1 if ok.sum() >= STEADY_SHARE * live else 0
@@ -396,8 +419,8 @@ def _step(state: _State, gray: np.ndarray | None, cfg: TrackingConfig, first: bo
     state.last_vel = np.where(steady[:, None], vel, state.last_vel)
     state.timed = state.timed | (steady & (not first))
     state.last_uv = np.where(ok[:, None], uv, state.last_uv)
-    state.last_mass = np.where(ok, mass, state.last_mass)
-    state.last_smass = np.where(ok, smass, state.last_smass)
+    state.last_mass = np.where(ok, meas.mass, state.last_mass)
+    state.last_smass = np.where(ok, meas.sigma_mass, state.last_smass)
     state.blind = np.where(ok, 0, state.blind if excused else state.blind + 1)
     state.since = np.where(ok, 1, state.since + 1)
     if first:
@@ -411,8 +434,29 @@ def _step(state: _State, gray: np.ndarray | None, cfg: TrackingConfig, first: bo
     # found but not yet confirmed: where it was found is the best guess
     virtual = np.where((reason == "unconfirmed")[:, None], uv, virtual)
     state.pred = np.where(ok[:, None], uv + state.last_vel, virtual)
+
+
+def _step(state: _State, gray: np.ndarray | None, cfg: TrackingConfig, first: bool) -> tuple:
+    """Track one frame: returns (uv (n, 2), area (n,), sigma_px (n,), reason (n,)) and advances
+    the state."""
+    if gray is None:  # no picture: extrapolate
+        return _extrapolate(state)
+    pred = state.pred
+    # targets left out of the chunk at its first frame are not measured again (NaN: 'lost')
+    probe = pred if first else np.where(np.isfinite(state.ref_mass)[:, None], pred, np.nan)
+    meas = measure_targets(gray, probe, state.radius, cfg)
+    if not first:  # the prediction moved by the motion the frame shows
+        pred, meas = _corrected_prediction(state, gray, cfg, pred, meas)
+    reason = meas.reason.copy()
+    if first:  # the tracker's centroid must agree with the detection's, or the target is left out
+        _set_reference(state, meas, pred, reason, cfg)
+    reason[~np.isfinite(state.ref_mass)] = "disagrees"
+    _check_measured(state, meas, pred, reason, cfg)
+    flow, valid = _check_flow(state, meas.uv, reason, cfg)
+    ok = reason == ""
+    _advance(state, meas, pred, reason, ok, flow, valid, first)
     sigma = np.where(ok, meas.sigma_px, np.nan)
-    return np.where(ok[:, None], uv, np.nan), meas.area, sigma, reason
+    return np.where(ok[:, None], meas.uv, np.nan), meas.area, sigma, reason
 
 
 def track_frames(

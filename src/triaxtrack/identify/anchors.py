@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from triaxtrack.identify.grid import ellipse_radius
+from triaxtrack.identify.state import IdentifyParams
 
 
 @dataclass(frozen=True)
@@ -100,25 +101,44 @@ def _grid_steps(grid: dict, pos: np.ndarray, nodes: list, di: int, dj: int) -> n
     )
 
 
-def _anchor_offsets(an: _Anchor, grid, nodes, xy, phase, pos, design, p, ctx) -> tuple[int, int] | None:
-    """(column offset, row offset) of a grid region from one anchor; None when it cannot tell."""
-    m = design["membrane"]
-    rc = design["coded_target"]["centre_radius"]
-    z_from_face = design["pedestal_targets"]["stripes"][0]["z_from_face"]
-    step, first = m["large_step"], m["large_first"]
-    pi, pj = phase
+def _anchor_down(
+    an: _Anchor, grid: dict, nodes: np.ndarray, xy: np.ndarray, pos: np.ndarray
+) -> np.ndarray | None:
+    """The unit image direction of -z at an anchor: along its CT pair, or for a single CT the
+    median step to the next row among the region's 30 dots nearest it (``nodes`` (N, 2) grid
+    indices (row, column) at ``xy`` (N, 2) undistorted pixels); None with fewer than 3 such steps."""
     ends = [e for e in (an.top, an.bottom) if e is not None]
-    p0 = ends[0][0]
     if len(ends) == 2:
         down = an.bottom[0] - an.top[0]
         down /= np.linalg.norm(down)
-    else:
-        near = np.argsort(np.linalg.norm(xy - p0, axis=1))[:30]
-        steps = _grid_steps(grid, pos, [tuple(nodes[k]) for k in near], 1, 0)
-        if len(steps) < 3:
-            return None
-        down = np.median(steps, axis=0)
-        down /= np.linalg.norm(down)
+        return down
+    near = np.argsort(np.linalg.norm(xy - ends[0][0], axis=1))[:30]
+    steps = _grid_steps(grid, pos, [tuple(nodes[k]) for k in near], 1, 0)
+    if len(steps) < 3:
+        return None
+    down = np.median(steps, axis=0)
+    down /= np.linalg.norm(down)
+    return down
+
+
+def _anchor_column(
+    an: _Anchor,
+    down: np.ndarray,
+    grid: dict,
+    nodes: np.ndarray,
+    xy: np.ndarray,
+    pos: np.ndarray,
+    pj: int,
+    step: int,
+    ctx: _MembraneView,
+) -> int | None:
+    """The region's grid column (index j) under the anchor: of the columns of larger dots (phase
+    ``pj``, every ``step``), the one whose dots nearest the CTs lie nearest the anchor's line along
+    ``down``, after the CTs' parallax; None when the region has fewer than 3 column steps near
+    the anchor, that column is more than 1.5 column pitches away (not in this region) or the
+    next one is not at least twice as far (seen too obliquely to tell)."""
+    ends = [e for e in (an.top, an.bottom) if e is not None]
+    p0 = ends[0][0]
     right = np.array([down[1], -down[0]])
     near = np.argsort(np.linalg.norm(xy - p0, axis=1))[:30]
     gaps = _grid_steps(grid, pos, [tuple(nodes[k]) for k in near], 0, 1)
@@ -147,23 +167,39 @@ def _anchor_offsets(an: _Anchor, grid, nodes, xy, phase, pos, design, p, ctx) ->
         return None
     ranked = sorted(cols, key=lambda j: abs(cols[j]))
     jc = ranked[0]
-    sel = np.nonzero(nodes[:, 1] == jc)[0]
     if abs(cols[jc]) > 1.5 * col_px:
         return None  # the anchor's column is not in this region
     if len(ranked) > 1 and abs(cols[ranked[1]]) < 2 * abs(cols[jc]):
         return None  # seen too obliquely to tell its column
-    c_off = step * (an.C - 1) + first - jc
-    # rows: the membrane's end row lies half a row pitch from the pedestal face, which is
-    # z_from_face from the CT centres (rigid); the pitch is measured on the column itself, as
-    # the membrane may be strained unevenly
+    return jc
+
+
+def _anchor_row(
+    an: _Anchor,
+    down: np.ndarray,
+    i_col: np.ndarray,
+    xy_col: np.ndarray,
+    pi: int,
+    design: dict,
+    p: IdentifyParams,
+) -> int | None:
+    """The region's row offset from the anchor, read on one grid column (row indices ``i_col``,
+    positions ``xy_col`` (N, 2) undistorted pixels) from each of its CTs: the membrane's end row
+    lies half a row pitch from the pedestal face, which is ``z_from_face`` from the CT centres
+    (rigid); the pitch is measured on the column itself, as the membrane may be strained
+    unevenly. The offset is the one of the larger dots' row phase ``pi`` nearest the readings;
+    None when no CT reads it or a reading is more than ``p.row_tolerance`` rows from it."""
+    m = design["membrane"]
+    rc = design["coded_target"]["centre_radius"]
+    z_from_face = design["pedestal_targets"]["stripes"][0]["z_from_face"]
+    step, first = m["large_step"], m["large_first"]
     estimates = []
-    i_col = nodes[sel, 0]
     for end, sign in ((an.top, 1.0), (an.bottom, -1.0)):
         if end is None:
             continue
         centre, mp = end
         mm_per_px = rc / ellipse_radius(mp[None], down[None])[0]
-        d_mm = np.abs((xy[sel] - centre) @ down) * mm_per_px
+        d_mm = np.abs((xy_col - centre) @ down) * mm_per_px
         order = np.argsort(d_mm)[:4]
         di = np.abs(np.diff(i_col[order]))
         if len(order) < 3 or np.any(di != 1):
@@ -183,7 +219,39 @@ def _anchor_offsets(an: _Anchor, grid, nodes, xy, phase, pos, design, p, ctx) ->
     r_off = base + step * round((np.mean(estimates) - base) / step)
     if any(abs(e - r_off) > p.row_tolerance for e in estimates):
         return None
-    return c_off % m["columns"], int(r_off)
+    return int(r_off)
+
+
+def _anchor_offsets(
+    an: _Anchor,
+    grid: dict,
+    nodes: np.ndarray,
+    xy: np.ndarray,
+    phase: tuple[int, int],
+    pos: np.ndarray,
+    design: dict,
+    p: IdentifyParams,
+    ctx: _MembraneView,
+) -> tuple[int, int] | None:
+    """(column offset, row offset) of a grid region from one anchor; None when it cannot tell:
+    the column of C's larger dots, c = (C - 1) * 4 + 1, is the region's column under the anchor
+    (:func:`_anchor_column`), and the row comes from the CTs' distance to the end rows
+    (:func:`_anchor_row`)."""
+    m = design["membrane"]
+    step, first = m["large_step"], m["large_first"]
+    pi, pj = phase
+    down = _anchor_down(an, grid, nodes, xy, pos)
+    if down is None:
+        return None
+    jc = _anchor_column(an, down, grid, nodes, xy, pos, pj, step, ctx)
+    if jc is None:
+        return None
+    c_off = step * (an.C - 1) + first - jc
+    sel = np.nonzero(nodes[:, 1] == jc)[0]
+    r_off = _anchor_row(an, down, nodes[sel, 0], xy[sel], pi, design, p)
+    if r_off is None:
+        return None
+    return c_off % m["columns"], r_off
 
 
 def _membrane_region_offsets(grid, phase, anchors, pos, design, p, ctx):

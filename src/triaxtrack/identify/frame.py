@@ -5,10 +5,12 @@ The method is described in :mod:`triaxtrack.identify`."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 import pandas as pd
 
-from triaxtrack.detect import background_size_px
+from triaxtrack.detect import DetectParams, background_size_px
 from triaxtrack.identify.anchors import _axis_down, _pedestal_anchors
 from triaxtrack.identify.cell import (
     _band_zone,
@@ -55,6 +57,146 @@ BAND_BLUR_PX = 0.5
 BLUR_REACH = 1.0  # a blurred band edge biases a dot about one lens-blur sigma beyond it (2: a 4K column lost)
 
 
+def _hide_behind_bands(
+    f: _Frame,
+    pool: _Pool,
+    long_names: set[str],
+    blur_px: float,
+    design: dict,
+    gray: np.ndarray | None,
+    detect_params: DetectParams | None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Drop what remains behind the white band of each identified longitudinal stripe (groups
+    ``long_names``): a dot whose image reaches the band's (half its major axis and
+    ``BAND_BLUR_PX``, or ``BLUR_REACH`` lens-blur sigmas ``blur_px``, from it) is partly hidden and
+    its centroid is biased. Returns that reach ``pad`` (per blob, pixels) and the blobs in a band's
+    zone (bool), widened by the white level's closing size when ``gray`` is given: beside a band a
+    dot's white level is the band's."""
+    blobs = f.blobs
+    # the band's blurred edge reaches BLUR_REACH lens-blur sigmas beyond its printed edge
+    pad = blobs.major_px.to_numpy() / 2 + max(BAND_BLUR_PX, BLUR_REACH * blur_px)
+    # a dot's white level is a closing over `size` pixels: beside a band it reads the band's white
+    size = background_size_px(gray.shape[1], detect_params) if gray is not None else 0
+    known = np.zeros(len(blobs), bool)
+    for sel in (np.nonzero(f.group == nm)[0] for nm in long_names):
+        if len(sel) >= 2:
+            order = sel[np.argsort(f.ids[sel])]
+            _hide_behind_band(f, pool, order, pad, design)
+            known |= _band_zone(f, order, pad + size, design)
+    return pad, known
+
+
+def _drop_unidentified_stripes(
+    f: _Frame, pool: _Pool, centres: dict, known: np.ndarray, pad: np.ndarray, design: dict
+) -> None:
+    """Take out of the pool the longitudinal stripes whose coded target is out of the picture: a
+    straight line of free dots along the axis, on a white band in front of the membrane, never
+    membrane dots, whose band hides the membrane (``pad``: :func:`_hide_behind_bands`). Dots in an
+    identified stripe's band zone (``known``) are not candidates: their white level is its."""
+    pos = f.pos
+    axis = _axis_down(_pedestal_anchors(centres, design))
+    free = np.nonzero(pool.free)[0]
+    pitch = float(np.nanmedian(_row_pitch_px(pos, free, axis))) if len(free) > 9 else np.nan
+    cand = np.nonzero(_on_another_surface(pool) & ~known)[0]
+    for order in _straight_chains(pos, cand, axis, pitch, design):
+        pool.free[order] = False
+        f.reason[order] = "on a longitudinal stripe not identified (its coded target not seen)"
+        _hide_behind_band(f, pool, order, pad, design)
+
+
+def _drop_inaccurate(
+    f: _Frame, edge: np.ndarray, recentred: np.ndarray, design: dict, p: IdentifyParams
+) -> None:
+    """Unlabel (with the reason) the labelled dots whose centroid is not accurate: cut by the image
+    border; too small or seen too obliquely for their place (see :class:`IdentifyParams`:
+    cell-wall dots beside a dark edge (``edge``) need more, re-centred ones (``recentred``) less
+    roundness); the last dot of a membrane row beside a dark edge (a silhouette, a pedestal edge),
+    whose blob takes in the edge's fringe (up to 1.4 px off on the demo), while the end rows along
+    the pedestal faces keep theirs, also beside a gap where one of their dots was lost to the
+    pedestal's edge (on four tests 0.17 px at the 95th percentile; the one bad dot, 0.93 px off,
+    had taken in the edge: 1.8 times its neighbours' area); and dots merged with an edge or
+    another dot, by their size and roundness against their grid or stripe neighbours
+    (``MERGED_*``)."""
+    blobs, n, m = f.blobs, len(f.blobs), design["membrane"]
+    membrane = _is_membrane(f.ids, m)
+    cell_area = np.where(edge, p.min_cell_area_px, p.min_clear_cell_area_px)
+    cell_round = np.where(edge, p.min_cell_roundness, p.min_clear_cell_roundness)
+    cell_round = np.where(recentred, p.min_recentred_roundness, cell_round)
+    row_end, row_gap = _membrane_row_ends(f.ids, m)
+    at_border = blobs.at_border.to_numpy(bool, copy=True) if "at_border" in blobs else np.zeros(n, bool)
+    # each blob's long axis over its target's printed diameter
+    diameter = target_table(design).set_index("id").diameter_mm.reindex(f.ids).to_numpy()
+    length = blobs.major_px.to_numpy() / diameter
+    area = blobs.area_px.to_numpy() / diameter**2
+    for bad, why in (
+        (at_border, "cut by the image border"),
+        (blobs.area_px.to_numpy() < np.where(membrane, p.min_membrane_area_px, cell_area),
+         "too small for an accurate centroid"),
+        (blobs.roundness.to_numpy() < np.where(membrane, p.min_membrane_roundness, cell_round),
+         "seen too obliquely for an accurate centroid"),
+        (row_end & ~row_gap & edge,
+         "last of its membrane row, beside a dark edge"),
+        (edge & (_over_neighbours(f.ids, blobs.area_px.to_numpy(), m) > MERGED_AREA_RATIO),
+         "larger than its neighbours beside a dark edge (merged with the edge)"),
+        ((_over_neighbours(f.ids, blobs.roundness.to_numpy(), m) < MERGED_ROUNDNESS_RATIO) & edge,
+         "less round than its neighbours, beside a dark edge (merged with the edge's fringe)"),
+        (_over_neighbours(f.ids, length, m) > MERGED_LENGTH_RATIO,
+         "longer than its grid neighbours (two dots, or a dot and an edge, merged)"),
+        (~membrane & (np.fmax(_over_chain_neighbours(f.ids, length, f.group),
+                              _over_chain_neighbours(f.ids, area, f.group)) > MERGED_LENGTH_RATIO),
+         "larger than its neighbours along its stripe (two dots, or a dot and an edge, merged)"),
+    ):  # fmt: skip
+        bad &= f.ids != UNLABELLED
+        f.ids[bad] = UNLABELLED
+        f.reason[bad] = why
+
+
+def _merged_pair_rows(
+    f: _Frame,
+    uv: np.ndarray,
+    gray: np.ndarray,
+    free: np.ndarray,
+    undistort: Callable[[np.ndarray], np.ndarray],
+    design: dict,
+    p: IdentifyParams,
+    detect_params: DetectParams | None,
+) -> pd.DataFrame:
+    """The rows (``LABEL_COLUMNS``) of membrane dots merged in pairs and fitted apart
+    (:func:`_split_merged_pairs`) among the ``free`` blobs, with their undistorted pixels; a dot
+    beyond the lens model is left out."""
+    split = _split_merged_pairs(f, uv, gray, free, design["membrane"], p, detect_params)
+    und = undistort(split[["u_px", "v_px"]].to_numpy(np.float64)) if len(split) else np.zeros((0, 2))
+    split = split.assign(u_undist_px=und[:, 0], v_undist_px=und[:, 1])
+    return split[np.isfinite(und).all(axis=1)]
+
+
+def _label_table(
+    f: _Frame, cts: pd.DataFrame, candidates: np.ndarray, uv: np.ndarray, split: pd.DataFrame
+) -> pd.DataFrame:
+    """The frame's labels (``LABEL_COLUMNS``): a row per CT (``quality`` its code's confidence),
+    per candidate dot (labelled, or ``id`` -1 with its reason) and per dot of a merged pair
+    fitted apart (``split``); ``uv``: the dots' pixels (re-centred ones moved)."""
+    blobs, pos = f.blobs, f.pos
+    ct_rows = pd.DataFrame({
+        "id": cts.id.to_numpy(np.int64), "kind": "coded", "group": "coded",
+        "u_px": cts.u_px.to_numpy(), "v_px": cts.v_px.to_numpy(),
+        "u_undist_px": pos[cts.blob.to_numpy(), 0] if len(cts) else [],
+        "v_undist_px": pos[cts.blob.to_numpy(), 1] if len(cts) else [],
+        "area_px": blobs.area_px.to_numpy()[cts.blob.to_numpy()] if len(cts) else [],
+        "roundness": blobs.roundness.to_numpy()[cts.blob.to_numpy()] if len(cts) else [],
+        "quality": cts.confidence.to_numpy(), "reason": "",
+    })  # fmt: skip
+    sel = np.nonzero(candidates)[0]
+    dot_rows = pd.DataFrame({
+        "id": f.ids[sel], "kind": "dot", "group": f.group[sel],
+        "u_px": uv[sel, 0], "v_px": uv[sel, 1], "u_undist_px": pos[sel, 0], "v_undist_px": pos[sel, 1],
+        "area_px": blobs.area_px.to_numpy()[sel], "roundness": blobs.roundness.to_numpy()[sel],
+        "quality": f.quality[sel], "reason": f.reason[sel],
+    })  # fmt: skip
+    parts = [ct_rows, dot_rows] + ([split[LABEL_COLUMNS].astype(dot_rows.dtypes)] if len(split) else [])
+    return pd.concat(parts, ignore_index=True)[LABEL_COLUMNS]
+
+
 def identify(
     blobs: pd.DataFrame,
     cts: pd.DataFrame,
@@ -98,41 +240,10 @@ def identify(
     pool = _Pool(pos, candidates, blobs)
     _label_cell_stripes(f, pool, centres, design, p)
     _label_longitudinal(f, pool, centres, design, p)
-    # the white band of a longitudinal stripe hides the membrane behind it: a dot whose image
-    # reaches the band's (half its major axis and BAND_BLUR_PX from it) is partly hidden and its
-    # centroid is biased, so drop what remains there
     long_names = {s["name"] for s in design["cell_targets"]["longitudinal_stripes"]}
-    # the band's blurred edge reaches BLUR_REACH lens-blur sigmas beyond its printed edge
-    pad = blobs.major_px.to_numpy() / 2 + max(BAND_BLUR_PX, BLUR_REACH * blur_px)
-    # a dot's white level is a closing over `size` pixels: beside a band it reads the band's white
-    size = background_size_px(gray.shape[1], detect_params) if gray is not None else 0
-    known = np.zeros(n, bool)
-    for sel in (np.nonzero(f.group == nm)[0] for nm in long_names):
-        if len(sel) >= 2:
-            order = sel[np.argsort(f.ids[sel])]
-            _hide_behind_band(f, pool, order, pad, design)
-            known |= _band_zone(f, order, pad + size, design)
-    # a stripe whose coded target is out of the picture is a straight line of free dots on a
-    # white band in front of the membrane: never membrane dots, and its band hides the membrane
-    # (dots beside an identified stripe's band are not candidates: their white level is its)
-    axis = _axis_down(_pedestal_anchors(centres, design))
-    free = np.nonzero(pool.free)[0]
-    pitch = float(np.nanmedian(_row_pitch_px(pos, free, axis))) if len(free) > 9 else np.nan
-    cand = np.nonzero(_on_another_surface(pool) & ~known)[0]
-    for order in _straight_chains(pos, cand, axis, pitch, design):
-        pool.free[order] = False
-        f.reason[order] = "on a longitudinal stripe not identified (its coded target not seen)"
-        _hide_behind_band(f, pool, order, pad, design)
+    pad, known = _hide_behind_bands(f, pool, long_names, blur_px, design, gray, detect_params)
+    _drop_unidentified_stripes(f, pool, centres, known, pad, design)
     _label_membrane(f, pool, centres, design, p)
-    # a dot too small or seen too obliquely for its place (see IdentifyParams: cell-wall dots
-    # beside a dark edge need more) has no accurate centroid: not reported; nor has the last dot
-    # of a membrane row beside a dark edge (a silhouette, a pedestal edge), whose blob takes in
-    # the edge's fringe (up to 1.4 px off on the demo), while the end rows along the pedestal
-    # faces keep theirs, also beside a gap where one of their dots was lost to the pedestal's
-    # edge (on four tests 0.17 px at the 95th percentile; the one bad dot, 0.93 px off, had
-    # taken in the edge: 1.8 times its neighbours' area)
-    m = design["membrane"]
-    membrane = _is_membrane(f.ids, m)
     edge = blobs.beside_edge.to_numpy(bool, copy=True)
     recentred = np.zeros(n, bool)
     if gray is not None:
@@ -143,62 +254,13 @@ def identify(
         ok = np.isfinite(new_pos).all(axis=1)
         k, new, new_pos = k[ok], new[ok], new_pos[ok]
         uv[k], pos[k], edge[k], recentred[k] = new, new_pos, False, True
-    cell_area = np.where(edge, p.min_cell_area_px, p.min_clear_cell_area_px)
-    cell_round = np.where(edge, p.min_cell_roundness, p.min_clear_cell_roundness)
-    cell_round = np.where(recentred, p.min_recentred_roundness, cell_round)
-    row_end, row_gap = _membrane_row_ends(f.ids, m)
-    at_border = blobs.at_border.to_numpy(bool, copy=True) if "at_border" in blobs else np.zeros(n, bool)
-    # each blob's long axis over its target's printed diameter
-    diameter = target_table(design).set_index("id").diameter_mm.reindex(f.ids).to_numpy()
-    length = blobs.major_px.to_numpy() / diameter
-    area = blobs.area_px.to_numpy() / diameter**2
-    for bad, why in (
-        (at_border, "cut by the image border"),
-        (blobs.area_px.to_numpy() < np.where(membrane, p.min_membrane_area_px, cell_area),
-         "too small for an accurate centroid"),
-        (blobs.roundness.to_numpy() < np.where(membrane, p.min_membrane_roundness, cell_round),
-         "seen too obliquely for an accurate centroid"),
-        (row_end & ~row_gap & edge,
-         "last of its membrane row, beside a dark edge"),
-        (edge & (_over_neighbours(f.ids, blobs.area_px.to_numpy(), m) > MERGED_AREA_RATIO),
-         "larger than its neighbours beside a dark edge (merged with the edge)"),
-        ((_over_neighbours(f.ids, blobs.roundness.to_numpy(), m) < MERGED_ROUNDNESS_RATIO) & edge,
-         "less round than its neighbours, beside a dark edge (merged with the edge's fringe)"),
-        (_over_neighbours(f.ids, length, m) > MERGED_LENGTH_RATIO,
-         "longer than its grid neighbours (two dots, or a dot and an edge, merged)"),
-        (~membrane & (np.fmax(_over_chain_neighbours(f.ids, length, f.group),
-                              _over_chain_neighbours(f.ids, area, f.group)) > MERGED_LENGTH_RATIO),
-         "larger than its neighbours along its stripe (two dots, or a dot and an edge, merged)"),
-    ):  # fmt: skip
-        bad &= f.ids != UNLABELLED
-        f.ids[bad] = UNLABELLED
-        f.reason[bad] = why
+    _drop_inaccurate(f, edge, recentred, design, p)
     split = pd.DataFrame(columns=LABEL_COLUMNS)
     if gray is not None:
         # a blob nothing labelled or turned down (not by a band, a filter), clear of a dark edge
         free = ~in_ct & invertible & ~edge & (f.reason == NOT_REACHED)
-        split = _split_merged_pairs(f, uv, gray, free, m, p, detect_params)
-        und = undistort(split[["u_px", "v_px"]].to_numpy(np.float64)) if len(split) else np.zeros((0, 2))
-        split = split.assign(u_undist_px=und[:, 0], v_undist_px=und[:, 1])
-        split = split[np.isfinite(und).all(axis=1)]
-    ct_rows = pd.DataFrame({
-        "id": cts.id.to_numpy(np.int64), "kind": "coded", "group": "coded",
-        "u_px": cts.u_px.to_numpy(), "v_px": cts.v_px.to_numpy(),
-        "u_undist_px": pos[cts.blob.to_numpy(), 0] if len(cts) else [],
-        "v_undist_px": pos[cts.blob.to_numpy(), 1] if len(cts) else [],
-        "area_px": blobs.area_px.to_numpy()[cts.blob.to_numpy()] if len(cts) else [],
-        "roundness": blobs.roundness.to_numpy()[cts.blob.to_numpy()] if len(cts) else [],
-        "quality": cts.confidence.to_numpy(), "reason": "",
-    })  # fmt: skip
-    sel = np.nonzero(candidates)[0]
-    dot_rows = pd.DataFrame({
-        "id": f.ids[sel], "kind": "dot", "group": f.group[sel],
-        "u_px": uv[sel, 0], "v_px": uv[sel, 1], "u_undist_px": pos[sel, 0], "v_undist_px": pos[sel, 1],
-        "area_px": blobs.area_px.to_numpy()[sel], "roundness": blobs.roundness.to_numpy()[sel],
-        "quality": f.quality[sel], "reason": f.reason[sel],
-    })  # fmt: skip
-    parts = [ct_rows, dot_rows] + ([split[LABEL_COLUMNS].astype(dot_rows.dtypes)] if len(split) else [])
-    return pd.concat(parts, ignore_index=True)[LABEL_COLUMNS]
+        split = _merged_pair_rows(f, uv, gray, free, undistort, design, p, detect_params)
+    return _label_table(f, cts, candidates, uv, split)
 
 
 def undistorted_pixels(camera) -> callable:

@@ -21,6 +21,7 @@ from triaxtrack.volume.grid import (
 from triaxtrack.volume.local import local_strains
 from triaxtrack.volume.mesh import (
     REFINE_LEVELS,
+    VolumeResult,
     check_mesh,
     closed_mesh,
     membrane_thickness,
@@ -28,7 +29,7 @@ from triaxtrack.volume.mesh import (
     write_ply,
 )
 from triaxtrack.volume.strains import strain_field
-from triaxtrack.volume.uncertainty import volume_uncertainty
+from triaxtrack.volume.uncertainty import VolumeUncertainty, volume_uncertainty
 
 FAILURES = (ValueError, np.linalg.LinAlgError)  # what makes one frame fail (NaN and a reason)
 
@@ -51,6 +52,78 @@ def frame_grid(
         cap = top_cap_from_membrane(points, table, design)
     ends = face_ends(design, cap, t0)
     return membrane_grid(points, table, max_missing_share, ends), cap, ends
+
+
+def _measure_frame(
+    pf: pd.DataFrame,
+    table: pd.DataFrame,
+    design: dict,
+    t0: float,
+    max_missing_share: float,
+    grid0: MembraneGrid | None,
+    thickness_model: str,
+    levels: tuple[int, int],
+    check: bool,
+) -> tuple[MembraneGrid, TopCap, VolumeResult, VolumeUncertainty, object]:
+    """One frame's (``pf``) filled grid, top cap, soil volume (mm^3), its uncertainty and whether
+    its dot mesh is watertight (<NA> unless ``check``), the membrane thinned from ``t0`` (mm)
+    against the reference grid ``grid0`` (None: this frame is the reference). Raises ``FAILURES``
+    when the frame cannot be measured."""
+    grid, cap, ends = frame_grid(pf, table, design, t0, max_missing_share)
+    thickness = membrane_thickness(grid, grid if grid0 is None else grid0, t0, model=thickness_model)
+    res = specimen_volume(grid, cap, thickness, levels)
+    unc = volume_uncertainty(grid, ends, cap, res.volume_mm3)
+    watertight = check_mesh(*closed_mesh(grid, cap))["watertight"] if check else pd.NA
+    return grid, cap, res, unc, watertight
+
+
+def _frame_warning(
+    share: float, unc: VolumeUncertainty, cap: TopCap, k0: int, first: int, warn_missing_share: float
+) -> str:
+    """Why a measured frame's volume is less sure than usual ('' when it is not): more than
+    ``warn_missing_share`` of its membrane dots filled (``share``: the share measured), no
+    leave-out place for the fill's uncertainty, the top cap not from its coded targets, or the
+    reference frame ``k0`` not the test's ``first``."""
+    warnings = []
+    if 1 - share > warn_missing_share:
+        warnings.append(f"{1 - share:.1%} of the membrane dots filled")
+    if not np.isfinite(unc.fill_mm3):
+        warnings.append("the fill's uncertainty is unknown (no leave-out place)")
+    if cap.source != "coded targets":
+        warnings.append(f"top cap from the {cap.source} (its coded targets not measured)")
+    if k0 != first:
+        warnings.append(f"strains relative to frame {k0}: the first frame {first} failed")
+    return "; ".join(warnings)
+
+
+def _volume_figures(
+    res: VolumeResult, unc: VolumeUncertainty, watertight: object, ref: tuple[int, MembraneGrid, float, float]
+) -> dict:
+    """A measured frame's :data:`~triaxtrack.tables.VOLUME_RESULT` volumes (mm^3), height (mm) and
+    specimen strains (compression positive) against the reference ``ref`` (frame, grid, H0 in mm,
+    V0 in mm^3)."""
+    k0, _, h0, v0 = ref
+    axial = (h0 - res.height_mm) / h0
+    volumetric = (v0 - res.volume_mm3) / v0
+    return {
+        "volume_mm3": res.volume_mm3, "axial_strain": axial, "volumetric_strain": volumetric,
+        "height_mm": res.height_mm, "radial_strain": (volumetric - axial) / 2,
+        "volume_change_mm3": res.volume_mm3 - v0, "mesh_volume_mm3": res.mesh_volume_mm3,
+        "chordal_mm3": res.chordal_mm3, "membrane_mm3": res.membrane_mm3,
+        "volume_sigma_mm3": unc.sigma_mm3, "filled_dots": res.filled_dots, "watertight": watertight,
+        "reference_frame": k0,
+    }  # fmt: skip
+
+
+def _strain_table(strain_parts: list[pd.DataFrame]) -> pd.DataFrame:
+    """The measured frames' membrane strains (:data:`~triaxtrack.tables.STRAINS` columns), sorted
+    by frame, row and column; empty, with the columns' dtypes, when no frame was measured."""
+    strain_cols = ["frame", "time_s", "row", "col", "theta_rad", "z_mm", "e_zz", "e_tt", "e_tz"]
+    strains = pd.concat(strain_parts, ignore_index=True)[strain_cols] if strain_parts else (
+        pd.DataFrame({c: pd.Series(dtype="int64" if c in ("frame", "row", "col") else "float64")
+                      for c in strain_cols})
+    )  # fmt: skip
+    return strains.sort_values(["frame", "row", "col"], kind="stable").reset_index(drop=True)
 
 
 def volume_series(
@@ -99,12 +172,10 @@ def volume_series(
         share = measured_share(pf, table)
         row = {"frame": int(frame), "time_s": time_s, "measured_fraction": share}
         try:
-            grid, cap, ends = frame_grid(pf, table, design, t0, max_missing_share)
-            grid0 = grid if ref is None else ref[1]
-            thickness = membrane_thickness(grid, grid0, t0, model=thickness_model)
-            res = specimen_volume(grid, cap, thickness, levels)
-            unc = volume_uncertainty(grid, ends, cap, res.volume_mm3)
-            watertight = check_mesh(*closed_mesh(grid, cap))["watertight"] if check else pd.NA
+            grid0 = None if ref is None else ref[1]
+            grid, cap, res, unc, watertight = _measure_frame(
+                pf, table, design, t0, max_missing_share, grid0, thickness_model, levels, check
+            )
             if ref is None:
                 ref = (int(frame), grid, res.height_mm, res.volume_mm3)
                 ref_points = pf
@@ -112,36 +183,17 @@ def volume_series(
         except FAILURES as err:
             rows.append(row | {"reason": str(err)})
             continue
-        k0, _, h0, v0 = ref
-        warnings = []
-        if 1 - share > warn_missing_share:
-            warnings.append(f"{1 - share:.1%} of the membrane dots filled")
-        if not np.isfinite(unc.fill_mm3):
-            warnings.append("the fill's uncertainty is unknown (no leave-out place)")
-        if cap.source != "coded targets":
-            warnings.append(f"top cap from the {cap.source} (its coded targets not measured)")
-        if k0 != frames[0]:
-            warnings.append(f"strains relative to frame {k0}: the first frame {frames[0]} failed")
-        axial = (h0 - res.height_mm) / h0
-        volumetric = (v0 - res.volume_mm3) / v0
-        rows.append(row | {
-            "volume_mm3": res.volume_mm3, "axial_strain": axial, "volumetric_strain": volumetric,
-            "height_mm": res.height_mm, "radial_strain": (volumetric - axial) / 2,
-            "volume_change_mm3": res.volume_mm3 - v0, "mesh_volume_mm3": res.mesh_volume_mm3,
-            "chordal_mm3": res.chordal_mm3, "membrane_mm3": res.membrane_mm3,
-            "volume_sigma_mm3": unc.sigma_mm3, "filled_dots": res.filled_dots, "watertight": watertight,
-            "reference_frame": k0, "warning": "; ".join(warnings), "reason": "",
-        } | local_strains(pf, ref_points, h0, membrane_ids))  # fmt: skip
+        warning = _frame_warning(share, unc, cap, ref[0], frames[0], warn_missing_share)
+        rows.append(
+            row
+            | _volume_figures(res, unc, watertight, ref)
+            | {"warning": warning, "reason": ""}
+            | local_strains(pf, ref_points, ref[2], membrane_ids)
+        )
         strain_parts.append(strains.assign(frame=int(frame), time_s=time_s))
     vol = pd.DataFrame(rows).reindex(columns=list(VOLUME_RESULT.columns))
     vol[["warning", "reason"]] = vol[["warning", "reason"]].fillna("")
-    vol = conform(vol, VOLUME_RESULT, "volume_series")
-    strain_cols = ["frame", "time_s", "row", "col", "theta_rad", "z_mm", "e_zz", "e_tt", "e_tz"]
-    strains = pd.concat(strain_parts, ignore_index=True)[strain_cols] if strain_parts else (
-        pd.DataFrame({c: pd.Series(dtype="int64" if c in ("frame", "row", "col") else "float64")
-                      for c in strain_cols})
-    )  # fmt: skip
-    return vol, strains.sort_values(["frame", "row", "col"], kind="stable").reset_index(drop=True)
+    return conform(vol, VOLUME_RESULT, "volume_series"), _strain_table(strain_parts)
 
 
 def volume_meshes(
