@@ -27,6 +27,7 @@ from triaxtrack.identify import (
     _Pool,
     _seed_grid,
     _split_merged_pairs,
+    _without_cross_support,
     grow_chain,
     grow_grid,
     label_frame,
@@ -344,6 +345,18 @@ def test_membrane_row_gaps_in_an_end_row():
     ends, gaps = _membrane_row_ends(np.array(bottom + above + top), m)
     assert ends.tolist() == [True] * 4 + [True, False, False, False, True] + [True] * 5
     assert gaps.tolist() == [False, True, True, False] + [False] * 5 + [False] * 5
+
+
+def test_a_rows_chain_alone_is_not_confirmed():
+    """A membrane dot with no labelled dot above or below it in its column (the top row's run
+    past the second row's end, towards a silhouette) is unconfirmed; one with a neighbour in the
+    next row, in an end row or not, and a cell-wall ID are confirmed."""
+    m = {"first_id": 1001, "rows": 60, "columns": 64}
+    top = [1001 + c for c in (36, 37, 38, 39)]  # row 0, columns 36-39
+    second = [1001 + 64 + c for c in (35, 36, 37)]  # row 1 ends at column 37
+    bottom = [1001 + 64 * 59 + 5, 1001 + 64 * 58 + 5]  # the last row, its column's dot above
+    alone = _without_cross_support(np.array(top + second + bottom + [131, -1]), m)
+    assert alone.tolist() == [False, False, True, True] + [True, False, False] + [False, False, False, False]
 
 
 def test_roundness_compared_with_the_grid_neighbours():

@@ -83,6 +83,7 @@ from triaxtrack.identify.membrane import _label_membrane as _label_membrane
 from triaxtrack.identify.membrane import _membrane_row_ends as _membrane_row_ends
 from triaxtrack.identify.membrane import _over_neighbours as _over_neighbours
 from triaxtrack.identify.membrane import _row_ends as _row_ends
+from triaxtrack.identify.membrane import _without_cross_support as _without_cross_support
 from triaxtrack.identify.merged import GAP_ACROSS_PX, MERGED_FIT_RMS, MERGED_HEIGHT_RATIO, MERGED_QUALITY
 from triaxtrack.identify.merged import _recentred_beside_edge as _recentred_beside_edge
 from triaxtrack.identify.merged import _split_merged_pairs as _split_merged_pairs

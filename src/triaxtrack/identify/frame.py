@@ -24,7 +24,13 @@ from triaxtrack.identify.cell import (
 )
 from triaxtrack.identify.coded import _ct_maps, _inside_cts, _plausible_cts
 from triaxtrack.identify.grid import _Pool
-from triaxtrack.identify.membrane import _is_membrane, _label_membrane, _membrane_row_ends, _over_neighbours
+from triaxtrack.identify.membrane import (
+    _is_membrane,
+    _label_membrane,
+    _membrane_row_ends,
+    _over_neighbours,
+    _without_cross_support,
+)
 from triaxtrack.identify.merged import _recentred_beside_edge, _split_merged_pairs
 from triaxtrack.identify.state import LABEL_COLUMNS, NOT_REACHED, UNLABELLED, IdentifyParams, _Frame
 from triaxtrack.kit import target_table
@@ -116,7 +122,8 @@ def _drop_inaccurate(
     pedestal's edge (on four tests 0.17 px at the 95th percentile; the one bad dot, 0.93 px off,
     had taken in the edge: 1.8 times its neighbours' area); and dots merged with an edge or
     another dot, by their size and roundness against their grid or stripe neighbours
-    (``MERGED_*``)."""
+    (``MERGED_*``); and, of the membrane dots left, those no dot of the rows above or below
+    confirms (:func:`~triaxtrack.identify.membrane._without_cross_support`)."""
     blobs, n, m = f.blobs, len(f.blobs), design["membrane"]
     membrane = _is_membrane(f.ids, m)
     cell_area = np.where(edge, p.min_cell_area_px, p.min_clear_cell_area_px)
@@ -149,6 +156,9 @@ def _drop_inaccurate(
         bad &= f.ids != UNLABELLED
         f.ids[bad] = UNLABELLED
         f.reason[bad] = why
+    alone = _without_cross_support(f.ids, m) & (f.ids != UNLABELLED)  # on the labels left
+    f.ids[alone] = UNLABELLED
+    f.reason[alone] = "no labelled grid neighbour in the rows above or below (a row's chain alone)"
 
 
 def _merged_pair_rows(
