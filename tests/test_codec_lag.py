@@ -249,3 +249,26 @@ def test_a_hold_and_a_reversal_within_a_gop_are_not_moved_by_the_ramp_before_the
     assert rms[hold].max() < 0.010  # the centroid noise is 0.007 px (u and v); was 0.036-0.051
     reversal = [46, 47, 48, 49, 50, 51, 52]  # lagging 0.5 x 0.085 px before the correction
     assert rms[reversal].max() < 0.012  # was 0.020-0.045
+
+
+def test_a_change_of_rate_at_a_keyframe_is_not_read_as_a_lag():
+    """Slow reloading, then a ramp 30 times as fast from half a frame before keyframe 30 (as at
+    a loading history's knot): the P frames before it, extrapolated to it, fall behind it by the
+    new motion; that keyframe is not measured, and no P frame is moved by more than the noise."""
+    rng = np.random.default_rng(5)
+    n = 300
+    direction = rng.normal(size=(n, 2))
+    start = rng.uniform(100, 900, (n, 2))
+    t = FRAMES.astype(float)
+    history = np.where(t < 29.5, 0.0075 * t, 0.0075 * 29.5 + 0.22 * (t - 29.5))
+    uv = start + history[:, None, None] * direction + rng.normal(0, 0.005, (len(FRAMES), n, 2))
+    tracks = pd.DataFrame({
+        "camera": "cam01", "frame": np.repeat(FRAMES, n),
+        "id": np.tile(np.arange(1001, 1001 + n), len(FRAMES)), "u_px": uv[:, :, 0].ravel(),
+        "v_px": uv[:, :, 1].ravel(), "area_px": 20.0, "sigma_px": 0.005, "reason": "",
+    })  # fmt: skip
+    fixed, lags = lag_corrected(tracks, KEYS)
+    assert 30 not in lags["keyframe"].tolist()
+    assert {0, 60} <= set(lags["keyframe"].tolist())
+    moved = np.hypot(fixed["u_px"] - tracks["u_px"], fixed["v_px"] - tracks["v_px"])
+    assert moved.max() < 0.02

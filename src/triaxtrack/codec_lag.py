@@ -26,7 +26,10 @@ axis (seven coefficients, with their standard errors; a coefficient within
 over the next ``FAR_FRAMES`` P frames beyond those (a velocity fitted to the same frames as
 the extrapolation shares its noise, and biases the ratio by as much as the lag itself at
 0.015 px of centroid noise); the quadratic absorbs the motion's own acceleration. A dot at rest
-carries no weight, so a static test gives no correction.
+carries no weight, so a static test gives no correction. A keyframe where the motion changes
+(the RMS speeds on its two sides differ by more than ``MAX_SPEED_RATIO``: a hold, a reversal, a
+new loading rate) is not measured: extrapolated across the change, the P frames would read as
+lagging by many frames.
 
 Each P frame's membrane dots are then moved forward by ``lag x'`` (``x'`` the dot's velocity
 from its own P-frame centroids around that frame, pixels per frame) and by the field, the
@@ -63,6 +66,7 @@ VELOCITY_FRAMES = 8  # the correction's velocity: a line through the P frames th
 MIN_VELOCITY_FRAMES = 5  # P frames needed in that window (else the dot is not moved along its motion)
 MIN_DOTS = 30  # dots needed (with every frame of the side reported) to measure a lag
 SIGNIFICANT_SIGMAS = 3.0  # a lag within this many standard errors of zero is not applied
+MAX_SPEED_RATIO = 1.5  # a keyframe whose two sides' RMS speeds differ more is not measured
 FIRST_MEMBRANE_ID = 1001  # the membrane dots (target-kit.md): the small dots the field is measured on
 FIELD_SCALE_PX = 1000.0  # the affine field's slopes are per this many pixels
 FIELD_COLUMNS = ("u0_px", "u_per_u", "u_per_v", "v0_px", "v_per_u", "v_per_v")
@@ -198,11 +202,25 @@ def estimate_lag(
         lo, hi = uf[max(0, i - reach)], uf[min(len(uf) - 1, i + reach)]
         near = mem.iloc[np.searchsorted(f, lo) : np.searchsorted(f, hi, side="right")]
         frames, _, uv = _positions(near)
-        for side in (-1, 1):
-            got = _side_fit(uv, frames, fences, int(k), side)
-            if got is not None:
-                rows.append((int(k), side, *_fit_side(*got)))
+        sides = {side: _side_fit(uv, frames, fences, int(k), side) for side in (-1, 1)}
+        if _motion_changes(*(got[1] for got in sides.values() if got is not None)):
+            continue  # a hold, a reversal or a change of rate at the keyframe: not a lag
+        rows += [(int(k), side, *_fit_side(*got)) for side, got in sides.items() if got is not None]
     return pd.DataFrame(rows, columns=list(LAG_COLUMNS))
+
+
+def _motion_changes(*velocities: np.ndarray) -> bool:
+    """Whether the dots' RMS speed on the two sides of a keyframe (each side's ``(n, 2)``
+    velocities, from :func:`_side_fit`) differs by more than ``MAX_SPEED_RATIO``: the motion
+    changed there (a hold, a reversal, a change of the loading rate), and the P frames'
+    extrapolation to the keyframe cannot tell the change from a lag. At a change from
+    0.0075 to 0.22 px per frame a keyframe read a lag of 10.6 frames (0.24 frames standard error),
+    which moved the P frames before it by up to 1 px. With one side only, nothing to compare."""
+    if len(velocities) < 2:
+        return False
+    rms = [float(np.sqrt((v * v).sum() / max(len(v), 1))) for v in velocities]
+    low, high = min(rms), max(rms)
+    return bool(high > MAX_SPEED_RATIO * low)
 
 
 def estimate_lag_chunks(chunks: Iterable[pd.DataFrame], keyframes: np.ndarray) -> pd.DataFrame:
