@@ -83,12 +83,44 @@ class CameraTiming:
         return abs(self.offset_residual_s * self.fps) > SUBFRAME_TOL_FRAMES
 
 
+def _load_test_yaml(path: Path):
+    """The parsed document of a test.yaml (any YAML value); OSError or YAMLError as raised. The
+    package's one ``yaml.safe_load`` of test.yaml: :func:`read_test_yaml` and the readers below."""
+    return yaml.safe_load(path.read_text())
+
+
+def read_test_yaml(test_yaml: str | Path) -> dict:
+    """A test.yaml as a mapping (``test-folder.md``; not validated: the workflow validates it
+    when it loads); ValueError naming the file when it is unreadable or not a mapping."""
+    path = Path(test_yaml)
+    try:
+        doc = _load_test_yaml(path)
+    except (OSError, yaml.YAMLError) as err:
+        raise ValueError(f"{path}: not a readable test.yaml: {err}") from err
+    if not isinstance(doc, dict):
+        raise ValueError(f"{path}: not a readable test.yaml: not a mapping")
+    return doc
+
+
+def read_test_fps(test_yaml: str | Path) -> float:
+    """test.yaml's ``fps``: the test clock's frames per second (module docstring); ValueError
+    naming the file when it is unreadable or has no positive ``fps``."""
+    doc = read_test_yaml(test_yaml)
+    try:
+        fps = float(doc["fps"])
+    except (KeyError, TypeError, ValueError) as err:
+        raise ValueError(f"{test_yaml}: test.yaml has no usable fps: {err!r}") from err
+    if not fps > 0:
+        raise ValueError(f"{test_yaml}: test.yaml's fps must be positive, not {fps}")
+    return fps
+
+
 def read_camera_timing(test_yaml: str | Path, camera: str) -> CameraTiming:
     """The timing of one camera from a test.yaml (cameras given as names or mappings);
     ValueError naming the file when it is unreadable or does not list the camera."""
     path = Path(test_yaml)
     try:
-        doc = yaml.safe_load(path.read_text())
+        doc = _load_test_yaml(path)
         fps = float(doc["fps"])
         entries = [c if isinstance(c, dict) else {"name": c} for c in doc["cameras"]]
     except (OSError, yaml.YAMLError, KeyError, TypeError, ValueError) as err:
@@ -113,7 +145,7 @@ def count_test_frames(test_yaml: str | Path, video: str | Path | None = None) ->
     when neither is there."""
     path = Path(test_yaml)
     try:
-        doc = yaml.safe_load(path.read_text())
+        doc = _load_test_yaml(path)
     except (OSError, yaml.YAMLError) as err:
         raise ValueError(f"{path}: not a readable test.yaml: {err}") from err
     if isinstance(doc, dict) and doc.get("frames") is not None:

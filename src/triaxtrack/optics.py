@@ -20,6 +20,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from triaxtrack.jsonfile import write_json
+
 NEWTON_MAX_ITER = 30
 NEWTON_TOL_MM = 1e-6  # point-to-ray distance accepted as converged (~3e-6 px at 300 mm)
 FD_STEP = 1e-7  # finite-difference step in normalised image coordinates
@@ -85,6 +87,12 @@ def read_cameras(path: str | Path) -> dict[str, Camera]:
         raise ValueError(f"{path}: not a cameras.json: {err}") from err
 
 
+def write_cameras(path: str | Path, cameras: dict[str, Camera]) -> None:
+    """Write ``cameras`` (name -> :class:`Camera`, in the order given) as a ``cameras.json``
+    (``test-folder.md``), the file :func:`read_cameras` reads."""
+    write_json(path, {"cameras": {name: cam.to_json() for name, cam in cameras.items()}})
+
+
 @dataclass(frozen=True)
 class CellOptics:
     """The refracting cell: radii in mm, refractive indices (dimensionless)."""
@@ -118,6 +126,19 @@ def cell_optics(
         n_water=float(design["water"]["refractive_index"] if n_water is None else n_water),
         z_min=c["z_min"],
         z_max=c["z_max"],
+    )
+
+
+def configured_cell(design: dict, cell_cfg: dict, outer_radius: float | None = None) -> CellOptics:
+    """:func:`cell_optics` of a kit design with the config's ``cell`` section (``cell_cfg``:
+    ``wall_thickness_mm``, ``n_acrylic``, ``n_water``, each null for the design's) and, if
+    given, a measured ``outer_radius`` (mm)."""
+    return cell_optics(
+        design,
+        outer_radius=outer_radius,
+        wall_thickness_mm=cell_cfg["wall_thickness_mm"],
+        n_acrylic=cell_cfg["n_acrylic"],
+        n_water=cell_cfg["n_water"],
     )
 
 

@@ -8,7 +8,6 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
-import yaml
 
 from triaxtrack.centroid import local_centroid
 from triaxtrack.simulate.config import SimulationConfig, recorded_frames
@@ -58,14 +57,14 @@ def check_simulation(test_dir: str | Path, out_json: str | Path | None = None) -
     and calibration images. ``ok`` is true when every video has the frames its camera recorded
     and the median errors are within 0.10 px (air) and 0.15 px (water).
     """
-    from triaxtrack.frames import frame_map, read_camera_timing, read_test_frame
+    from triaxtrack.frames import frame_map, read_camera_timing, read_test_frame, read_test_yaml
     from triaxtrack.video import probe_video
 
     test_dir = Path(test_dir)
     scene_cfg = SimulationConfig.from_dict(
         json.loads((test_dir / "truth" / "scene.json").read_text())["simulation"]
     )
-    meta = yaml.safe_load((test_dir / "test.yaml").read_text())
+    meta = read_test_yaml(test_dir / "test.yaml")
     truth_obs = read_table(test_dir / "truth" / "observations.parquet", OBSERVATIONS)
     targets = pd.read_csv(test_dir / "kit" / "targets.csv").set_index("id")
     rows, per_camera = [], {}

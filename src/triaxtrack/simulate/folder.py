@@ -12,6 +12,7 @@ import pandas as pd
 import yaml
 
 from triaxtrack.kit import load_kit_design
+from triaxtrack.optics import write_cameras
 from triaxtrack.simulate.boards import render_calibration
 from triaxtrack.simulate.cameras import make_cameras
 from triaxtrack.simulate.config import (
@@ -73,9 +74,7 @@ def make_scene(cfg: SimulationConfig, kit_dir: str | Path, test_dir: str | Path,
                  "compression positive; volume = soil inside the membrane's inner surface, "
                  "between the pedestal faces",
     }, indent=2))  # fmt: skip
-    (test_dir / "truth" / "cameras.json").write_text(
-        json.dumps({"cameras": {c.name: c.to_json() for c in cams}}, indent=2)
-    )
+    write_cameras(test_dir / "truth" / "cameras.json", {c.name: c for c in cams})
     write_table(truth_volume(cfg, deformation), test_dir / "truth" / "volume.parquet", VOLUME)
 
 
