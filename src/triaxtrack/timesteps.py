@@ -13,18 +13,39 @@ Chunks are tracked independently (``triaxtrack.track``); neighbouring chunks sha
 which the IDs carried to the end of one chunk are compared with the labels of the next
 (:func:`handover_check`).
 
+The workflow's stages: one chunk triangulated (:func:`run_triangulate_chunk`), and the chunks
+of a test collected with its quality report (:func:`run_collect_timesteps`).
+
 Units: millimetres in the cell frame, pixels (distorted, OpenCV convention), seconds.
 """
 
 from __future__ import annotations
 
+import json
+from collections.abc import Sequence
+from pathlib import Path
+
 import numpy as np
 import pandas as pd
 
-from triaxtrack.optics import Camera, CellOptics, project_air
+from triaxtrack.codec_lag import corrected_tracks, read_lag_files
+from triaxtrack.frames import read_test_fps
+from triaxtrack.jsonfile import read_json, write_json
+from triaxtrack.kit import load_kit_design, target_table
+from triaxtrack.optics import Camera, CellOptics, project_air, read_cameras
 from triaxtrack.refractive_pose import pnp_pose
-from triaxtrack.tables import Schema
-from triaxtrack.triangulate import TriangulationConfig, triangulate_refracted
+from triaxtrack.tables import (
+    LABELS,
+    OBSERVATIONS,
+    POINTS,
+    RESIDUALS,
+    TRACKS,
+    Schema,
+    concat_tables,
+    read_table,
+    write_table,
+)
+from triaxtrack.triangulate import TriangulationConfig, quality_cell, triangulate_refracted
 
 MOVED_PX = 0.3  # default: a camera whose cell-wall targets drift by more (median) has moved
 MIN_WALL_TARGETS = 5  # fewer tracked cell-wall targets in a frame: the camera cannot be checked
@@ -330,3 +351,101 @@ def observations_table(tracks: pd.DataFrame, residuals: pd.DataFrame) -> pd.Data
     out["used"] = out["used"].astype("boolean").fillna(False).astype(bool)
     out["reason"] = out["reason"].fillna("").astype(str)
     return out
+
+
+# ---------------------------------------------------------------- the workflow's stages
+
+
+def run_triangulate_chunk(
+    *,
+    tracks: Sequence[str | Path],
+    lags: Sequence[str | Path],
+    cameras: str | Path,
+    reference: str | Path,
+    reference_points: str | Path,
+    kit: str | Path,
+    test_yaml: str | Path,
+    points: str | Path,
+    residuals: str | Path,
+    motion: str | Path,
+    reconstruction_cfg: dict,
+    tracking_cfg: dict,
+) -> None:
+    """Rule triangulate_chunk: every tracked target in the water at every processed frame of
+    one chunk (``tracks``: every camera's), with the ``cameras`` (``cameras.json``) and the cell
+    of the first frame (``reference``: its ``quality.json``), each camera's P frames corrected
+    by its codec lag (``lags``: :mod:`triaxtrack.codec_lag` files, none for no correction), and
+    the cameras checked for motion against the first frame's cell-wall points
+    (``reference_points``; :func:`camera_motion`); kit folder ``kit``, ``test_yaml``'s fps,
+    ``reconstruction_cfg`` and ``tracking_cfg`` the config's ``reconstruction`` and ``tracking``
+    sections. Writes the ``points``, ``residuals`` and ``motion`` tables; prints counts."""
+    posed = read_cameras(cameras)
+    cell = quality_cell(read_json(reference, "quality.json"))
+    table = target_table(load_kit_design(kit))
+    fps = read_test_fps(test_yaml)
+    tracked = concat_tables(tracks, TRACKS)
+    if lags:  # P frames moved by each camera's codec lag (rule measure_codec_lag)
+        tracked = corrected_tracks(tracked, read_lag_files(lags))
+    first = read_table(reference_points, POINTS)
+    wall = first[first["id"].isin(table.loc[table["surface"] == "cell_outer", "id"])]
+    moved_px = tracking_cfg["moved_px"]
+    moves, poses = camera_motion(posed, wall, tracked, moved_px)
+    in_water = table.loc[table["surface"] != "cell_outer", "id"].to_numpy()
+    frames = np.unique(tracked["frame"].to_numpy())
+    cfg = TriangulationConfig.from_dict(reconstruction_cfg)
+    pts, res = triangulate_frames(posed, tracked, cell, in_water, frames, fps, cfg, moves, poses)
+    write_table(pts, points, POINTS)
+    write_table(res, residuals, RESIDUALS)
+    write_table(moves, motion, MOTION)
+    print(f"{len(frames)} frames, {len(pts)} points, {int(res['used'].sum())} observations used")
+    print(pts.groupby("frame").size().describe().to_string())
+    moved = moves[moves["moved"]]
+    if len(moved):
+        print(f"cameras moved (cell-wall drift above {moved_px} px): {sorted(set(moved['camera']))}, "
+              f"posed again at {int(moved['reposed'].sum())} of their {len(moved)} frames")  # fmt: skip
+    print(f"largest cell-wall drift: {moves['drift_px'].max():.3f} px")
+
+
+def run_collect_timesteps(
+    *,
+    chunk_points: Sequence[str | Path],
+    chunk_residuals: Sequence[str | Path],
+    chunk_motion: Sequence[str | Path],
+    tracks: Sequence[str | Path],
+    handovers: Sequence[str | Path],
+    labels: str | Path,
+    reference: str | Path,
+    kit: str | Path,
+    points: str | Path,
+    observations: str | Path,
+    tracking: str | Path,
+    quality: str | Path,
+    handover_px: float,
+    cameras_left_out: dict[str, str],
+) -> None:
+    """Rule collect_timesteps: the chunks of a test in one: their ``chunk_points``,
+    ``chunk_residuals``, ``chunk_motion`` (rule triangulate_chunk) and ``tracks``, the
+    ``handovers`` (the tracks each chunk carried to the next chunk's first frame) checked
+    against the ``labels`` within ``handover_px`` (:func:`handover_checks`); with the first
+    frame's ``reference`` (its ``quality.json``), the kit folder ``kit`` and the cameras left out
+    of the test (``{camera: why}``). Writes ``points``, ``observations``
+    (:func:`observations_table`), ``tracking`` and the test's ``quality``
+    (:func:`timestep_quality`); prints its summary."""
+    table = target_table(load_kit_design(kit))
+    membrane_ids = table.loc[table["surface"] == "membrane", "id"].to_numpy()
+    pts = concat_tables(chunk_points, POINTS)
+    res = concat_tables(chunk_residuals, RESIDUALS)
+    moves = concat_tables(chunk_motion, MOTION)
+    tracked = concat_tables(tracks, TRACKS)
+    shared = concat_tables(handovers, TRACKS)
+    checks = handover_checks(shared, read_table(labels, LABELS), handover_px)
+    first = read_json(reference, "quality.json")
+    report = timestep_quality(first, pts, res, tracked, moves, checks, membrane_ids, cameras_left_out)
+    write_table(pts, points, POINTS)
+    write_table(observations_table(tracked, res), observations, OBSERVATIONS)
+    write_table(tracked, tracking, TRACKS)
+    write_json(quality, report)
+    print(json.dumps({k: report[k] for k in ("mean_reprojection_px", "tracking", "camera_motion")}, indent=2))
+    print(pd.DataFrame(report["frames"]).describe().to_string())
+    h = report["handovers"]
+    print(f"handovers: {h['checked']} checked, {h['disagreements']} disagreements")

@@ -1,20 +1,13 @@
 """Rule calibrate_camera: K and distortion of one camera from its checkerboard images."""
 
-import json
-
-from triaxtrack import __version__
-from triaxtrack.calibrate import CalibrationConfig, calibrate_camera, format_calibration
+from triaxtrack.calibrate import run_calibrate_camera
 from triaxtrack.logs import log_to
 
 log = log_to(snakemake.log[0])
 
-result = calibrate_camera(
-    snakemake.wildcards.camera,
-    snakemake.params.folder,
-    snakemake.input.kit,
-    CalibrationConfig.from_dict(snakemake.params.calibration),
-)
-result["triaxtrack_version"] = __version__
-with open(snakemake.output.calibration, "w") as f:
-    json.dump(result, f, indent=2)
-print(format_calibration(result))
+p = snakemake.params
+run_calibrate_camera(
+    camera=snakemake.wildcards.camera, folder=p.folder, kit=snakemake.input.kit,
+    calibration=snakemake.output.calibration,
+    calibration_cfg=p.calibration,
+)  # fmt: skip

@@ -67,7 +67,8 @@ Modules:
   (:func:`fit_views`, :func:`calibrate_views`);
 * :mod:`~triaxtrack.calibrate.files`: the kit's board.json, the board images and the result JSON
   (:func:`read_calibration`, :func:`calibrated_camera`, :func:`format_calibration`);
-* :mod:`~triaxtrack.calibrate.pipeline`: one camera end to end (:func:`calibrate_camera`).
+* :mod:`~triaxtrack.calibrate.pipeline`: one camera end to end (:func:`calibrate_camera`), and
+  the workflow's stage (:func:`run_calibrate_camera`).
 """
 
 from triaxtrack.calibrate.board import (
@@ -135,7 +136,7 @@ from triaxtrack.calibrate.grid import (
     grow_grid,
     saddle_points,
 )
-from triaxtrack.calibrate.pipeline import calibrate_camera, detect_boards, refine_boards
+from triaxtrack.calibrate.pipeline import calibrate_camera, detect_boards, refine_boards, run_calibrate_camera
 
 __all__ = [
     "BoardImage", "CALIBRATE_CRITERIA", "CHECKER_AGREEMENT", "CalibrationConfig", "CalibrationError",
@@ -149,5 +150,6 @@ __all__ = [
     "find_board_corners", "find_partial_board", "find_whole_board", "fit_views", "format_calibration",
     "grid_indices", "grow_grid", "list_board_images", "neighbour_spacing_px", "outlier_limit_px",
     "read_board", "read_calibration", "refine_boards", "refine_corners", "refine_view", "right_handed",
+    "run_calibrate_camera",
     "saddle_points", "smooth_image", "view_rms_px",
 ]  # fmt: skip

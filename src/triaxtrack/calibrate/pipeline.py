@@ -1,5 +1,6 @@
 """One camera end to end: its boards found, the camera fitted, the corners refined again through
-that fit and the camera fitted again (:func:`calibrate_camera`)."""
+that fit and the camera fitted again (:func:`calibrate_camera`); the workflow's stage, from the
+files to the result JSON (:func:`run_calibrate_camera`)."""
 
 from __future__ import annotations
 
@@ -11,8 +12,9 @@ import numpy as np
 from triaxtrack.calibrate.board import BoardImage, _enough, find_board
 from triaxtrack.calibrate.config import CalibrationConfig, CalibrationError
 from triaxtrack.calibrate.corners import refine_view
-from triaxtrack.calibrate.files import _read_gray, list_board_images, read_board
+from triaxtrack.calibrate.files import _read_gray, format_calibration, list_board_images, read_board
 from triaxtrack.calibrate.fit import _object_points, calibrate_views
+from triaxtrack.jsonfile import write_json
 
 
 def detect_boards(
@@ -84,3 +86,18 @@ def calibrate_camera(camera: str, folder: str | Path, kit_dir: str | Path, cfg: 
         found = refine_boards(camera, paths, found, board, K, dist)
         result = calibrate_views(camera, found, size, board, cfg, folder)
     return {**result, "passes": cfg.passes}
+
+
+def run_calibrate_camera(
+    *, camera: str, folder: str | Path, kit: str | Path, calibration: str | Path, calibration_cfg: dict
+) -> None:
+    """Rule calibrate_camera: calibrate ``camera`` from its board images in ``folder`` and the
+    board of the kit folder ``kit`` (``calibration_cfg``: the config's ``calibration`` section);
+    write the result, stamped with the package's version, to ``calibration`` and print its
+    summary."""
+    from triaxtrack import __version__
+
+    cfg = CalibrationConfig.from_dict(calibration_cfg)
+    result = {**calibrate_camera(camera, folder, kit, cfg), "triaxtrack_version": __version__}
+    write_json(calibration, result)
+    print(format_calibration(result))

@@ -23,7 +23,8 @@ Modules (the method of each step is described in its module):
 * :mod:`~triaxtrack.identify.merged`: stripe dots re-centred beside a dark edge, and membrane
   dots merged in pairs fitted apart (``quality`` ``MERGED_QUALITY``);
 * :mod:`~triaxtrack.identify.frame`: :func:`identify` (one frame's detections, then the accuracy
-  filters), :func:`label_frame`, :func:`label_chunk_start` and :func:`draw_labels`.
+  filters), :func:`label_frame`, :func:`label_chunk_start` and :func:`draw_labels`, and the
+  workflow's stage (:func:`run_identify_targets`).
 """
 
 from triaxtrack.identify.anchors import MAX_TAN_PHI, MIN_OVERRULING_PAIRS, settle_offsets
@@ -58,6 +59,7 @@ from triaxtrack.identify.frame import (
     identify,
     label_chunk_start,
     label_frame,
+    run_identify_targets,
     undistorted_pixels,
 )
 from triaxtrack.identify.grid import (
@@ -97,6 +99,6 @@ __all__ = [
     "MERGED_FIT_RMS", "MERGED_HEIGHT_RATIO", "MERGED_QUALITY", "MERGED_ROUNDNESS_RATIO",
     "MIN_CHAIN_DOTS", "MIN_OVERRULING_PAIRS", "MIN_SUPPORT", "NEIGHBOURS", "NOT_REACHED",
     "SURFACE_NEIGHBOURS", "UNLABELLED", "WHITE_TOLERANCE", "draw_labels", "ellipse_radius", "grow_chain",
-    "grow_grid", "identify", "label_chunk_start", "label_frame", "local_affine", "settle_offsets",
-    "undistorted_jacobians", "undistorted_pixels",
+    "grow_grid", "identify", "label_chunk_start", "label_frame", "local_affine", "run_identify_targets",
+    "settle_offsets", "undistorted_jacobians", "undistorted_pixels",
 ]  # fmt: skip

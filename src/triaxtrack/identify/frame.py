@@ -1,15 +1,18 @@
 """One frame's identification (:func:`identify`, the steps in order, then the accuracy filters),
 detection and identification of a grey frame (:func:`label_frame`), the chunk start's labels
-(:func:`label_chunk_start`) and a picture of them for a person to check (:func:`draw_labels`).
+(:func:`label_chunk_start`) and a picture of them for a person to check (:func:`draw_labels`);
+the workflow's stage, from the files to the labels and pictures (:func:`run_identify_targets`).
 The method is described in :mod:`triaxtrack.identify`."""
 
 from __future__ import annotations
 
 from collections.abc import Callable
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
+from triaxtrack.calibrate.files import calibrated_camera, read_calibration
 from triaxtrack.detect import DetectParams, background_size_px
 from triaxtrack.identify.anchors import _axis_down, _pedestal_anchors
 from triaxtrack.identify.cell import (
@@ -33,7 +36,8 @@ from triaxtrack.identify.membrane import (
 )
 from triaxtrack.identify.merged import _recentred_beside_edge, _split_merged_pairs
 from triaxtrack.identify.state import LABEL_COLUMNS, NOT_REACHED, UNLABELLED, IdentifyParams, _Frame
-from triaxtrack.kit import target_table
+from triaxtrack.kit import ct_codes, load_kit_design, target_table
+from triaxtrack.tables import FRAME_MAP, LABELS, read_table, write_table
 
 # a membrane dot beside a dark edge this much less round than its grid neighbours (seen at the
 # same angle) has merged with the edge's fringe: on the demo one at 0.52 was 1.4 px off; 0.45 %
@@ -340,3 +344,42 @@ def label_chunk_start(
             labels = label_frame(image, camera, design, codes)
             return k, image, labels.assign(camera=camera.name, frame=k)
     return None, None, pd.DataFrame(columns=["camera", "frame", *LABEL_COLUMNS])
+
+
+def run_identify_targets(
+    *,
+    video: str | Path,
+    frames: str | Path,
+    calibration: str | Path,
+    kit: str | Path,
+    labels: str | Path,
+    frame: str | Path,
+    overlay: str | Path,
+    chunk: dict,
+) -> None:
+    """Rule identify_targets: label the first frame of ``chunk`` (``{'start', 'stop'}``, stop
+    exclusive) that the camera of ``calibration`` recorded in ``video`` (frame map ``frames``),
+    with the kit folder ``kit``; write the ``labels`` table, the grey ``frame`` and the
+    ``overlay`` of the labels as PNG, and print the counts. ValueError naming the video when the
+    camera recorded none of the chunk's frames (the labels table is written first, empty)."""
+    import cv2
+
+    camera = calibrated_camera(read_calibration(calibration))
+    design = load_kit_design(kit)
+    codes = ct_codes(design, target_table(design))
+    fmap = read_table(frames, FRAME_MAP)
+    start, stop = chunk["start"], chunk["stop"]
+    k, image, got = label_chunk_start(video, fmap, camera, design, codes, start, stop)
+    write_table(got, labels, LABELS)
+    if image is None:
+        raise ValueError(
+            f"{video}: camera {camera.name} recorded none of test frames {start}..{stop - 1} (see {frames})"
+        )
+    cv2.imwrite(str(frame), image)
+    cv2.imwrite(str(overlay), draw_labels(image, got))
+    found = got[got.id > 0]
+    print(
+        f"{camera.name} frame {k}: {len(found)} targets labelled ({(found.kind == 'coded').sum()} CTs), "
+        f"{(got.id < 0).sum()} detections left unlabelled:"
+    )
+    print(got[got.id < 0].reason.value_counts().to_string())

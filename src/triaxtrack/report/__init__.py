@@ -5,7 +5,9 @@ takes tables (or ``quality.json`` as a dict) and returns a new :class:`matplotli
 :func:`figure_image` draws one as a (H, W, 3) uint8 BGR image and :func:`save_figure` writes it
 as PNG. Nothing here
 reads or writes files except :func:`save_figure`, :func:`write_movie` and
-:func:`write_movie_page`, which write the one file they are given.
+:func:`write_movie_page`, which write the one file they are given, and the workflow's stages
+:func:`run_report_figures` and :func:`run_specimen_movie`, which read a test's files and write
+its figures and movie.
 
 * :func:`volume_strain_figure`: volume change (with its uncertainty band) and the specimen
   strains against time, and the share of membrane dots measured.
@@ -33,12 +35,19 @@ from triaxtrack.report.figures import (
     REPORTED,
     draw_bars,
     reprojection_figure,
+    run_report_figures,
     tracking_figure,
     volume_strain_figure,
 )
 from triaxtrack.report.layout import MembraneLayout, membrane_layout
 from triaxtrack.report.maps import strain_map_figure, strain_maps_figure
-from triaxtrack.report.movie import DIVERGING, specimen_frames, write_movie, write_movie_page
+from triaxtrack.report.movie import (
+    DIVERGING,
+    run_specimen_movie,
+    specimen_frames,
+    write_movie,
+    write_movie_page,
+)
 from triaxtrack.report.style import DIVERGING_CMAP, PALETTE, figure_image, save_figure
 
 __all__ = [
@@ -54,6 +63,8 @@ __all__ = [
     "figure_image",
     "membrane_layout",
     "reprojection_figure",
+    "run_report_figures",
+    "run_specimen_movie",
     "save_figure",
     "specimen_frames",
     "strain_map_figure",

@@ -1,5 +1,6 @@
 """The report's charts on matplotlib: volume and strains against time, reprojection error and
-tracking losses.
+tracking losses; and the workflow's stage that draws every figure of a test from its files
+(:func:`run_report_figures`).
 
 Each ``*_figure`` function takes tables (or ``quality.json`` as a dict) and returns a new
 :class:`matplotlib.figure.Figure` (Agg, never pyplot). :func:`draw_bars` is the bar panel they share (and
@@ -12,15 +13,21 @@ drawn in per cent; times in seconds on the test clock.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 
-from triaxtrack.report.common import number
-from triaxtrack.report.layout import MembraneLayout
-from triaxtrack.report.style import PALETTE, new_figure, no_data, styled
+from triaxtrack.camera_report import camera_quality, camera_quality_figure
+from triaxtrack.jsonfile import read_json
+from triaxtrack.kit import load_kit_design
+from triaxtrack.report.common import chosen_frames, number
+from triaxtrack.report.layout import MembraneLayout, membrane_layout
+from triaxtrack.report.maps import strain_maps_figure
+from triaxtrack.report.style import PALETTE, new_figure, no_data, save_figure, styled
+from triaxtrack.tables import LABELS, STRAINS, TRACKS, VOLUME, read_table
 from triaxtrack.timesteps import LARGE_LOSS_SHARE, large_losses
 
 __all__ = [
@@ -29,6 +36,7 @@ __all__ = [
     "REPORTED",
     "draw_bars",
     "reprojection_figure",
+    "run_report_figures",
     "tracking_figure",
     "volume_strain_figure",
 ]
@@ -327,3 +335,45 @@ def tracking_figure(tracks: pd.DataFrame, layout: MembraneLayout, width_px: int 
     )
     axes[2].set_xlabel("camera")
     return fig
+
+
+def run_report_figures(
+    *,
+    volume: str | Path,
+    strains: str | Path,
+    quality: str | Path,
+    tracking: str | Path,
+    labels: str | Path,
+    kit: str | Path,
+    volume_strain_png: str | Path,
+    strain_maps_png: str | Path,
+    reprojection_png: str | Path,
+    tracking_png: str | Path,
+    cameras_png: str | Path,
+    strain_map_frames: int,
+) -> None:
+    """Rule report_figures: the report's PNG figures of one test from its ``volume``,
+    ``strains``, ``quality`` (the test's ``quality.json``), ``tracking`` and ``labels``, with the
+    membrane grid of the kit folder ``kit``: volume and strains (:func:`volume_strain_figure`),
+    local strain maps at ``strain_map_frames`` frames spread over the test
+    (:func:`~triaxtrack.report.maps.strain_maps_figure`), reprojection error
+    (:func:`reprojection_figure`), tracking losses (:func:`tracking_figure`) and footage quality
+    per camera (:func:`triaxtrack.camera_report.camera_quality_figure`). Prints the kit's grid,
+    the per-camera quality table, the frames mapped and the files written."""
+    layout = membrane_layout(load_kit_design(kit))
+    print(f"kit: {layout.describe()}")
+    vol = read_table(volume, VOLUME)
+    local = read_table(strains, STRAINS)
+    report = read_json(quality, "quality.json")
+    tracks = read_table(tracking, TRACKS)
+    cameras = camera_quality(tracks, read_table(labels, LABELS))
+    print(cameras.to_string(index=False))
+    frames = chosen_frames(local["frame"].unique(), strain_map_frames)
+    print(f"strain maps at frames {frames}")
+    save_figure(volume_strain_figure(vol), volume_strain_png)
+    save_figure(strain_maps_figure(local, layout, frames), strain_maps_png)
+    save_figure(reprojection_figure(report), reprojection_png)
+    save_figure(tracking_figure(tracks, layout), tracking_png)
+    save_figure(camera_quality_figure(cameras), cameras_png)
+    written = (volume_strain_png, strain_maps_png, reprojection_png, tracking_png, cameras_png)
+    print(f"figures written: {', '.join(str(path) for path in written)}")

@@ -3,7 +3,8 @@ self-contained HTML page that plays it.
 
 Frames are drawn with OpenCV (filled quads of the membrane grid, a video rather than a chart);
 the colour bar beside them is drawn once by matplotlib. The membrane grid (which IDs are
-membrane dots, where each sits on the grid) is the kit's :class:`MembraneLayout`.
+membrane dots, where each sits on the grid) is the kit's :class:`MembraneLayout`. The workflow's
+stage, from the files to the movie and its page: :func:`run_specimen_movie`.
 """
 
 from __future__ import annotations
@@ -23,9 +24,11 @@ import pandas as pd
 from matplotlib.cm import ScalarMappable
 from matplotlib.colors import Normalize, to_rgb
 
-from triaxtrack.report.common import MIN_RANGE, half_range
-from triaxtrack.report.layout import MembraneLayout
+from triaxtrack.kit import load_kit_design
+from triaxtrack.report.common import MIN_RANGE, chosen_frames, half_range
+from triaxtrack.report.layout import MembraneLayout, membrane_layout
 from triaxtrack.report.style import DIVERGING_CMAP, MISSING, figure_image, new_figure, styled
+from triaxtrack.tables import POINTS, STRAINS, read_table
 from triaxtrack.video.write import CODECS, ENCODER_THREADS
 
 __all__ = ["DIVERGING", "specimen_frames", "write_movie", "write_movie_page"]
@@ -398,3 +401,39 @@ def write_movie_page(movie: str | Path, path: str | Path, title: str = "") -> No
         "</body>\n</html>\n"
     )
     Path(path).write_text(page, encoding="ascii")
+
+
+def run_specimen_movie(
+    *,
+    points: str | Path,
+    strains: str | Path,
+    kit: str | Path,
+    movie: str | Path,
+    player: str | Path,
+    test: str,
+    fps: float,
+    max_frames: int,
+    colour_by: str,
+    magnify: float,
+    height_px: int,
+) -> None:
+    """Rule specimen_movie: the deforming specimen of ``test`` (its ``points`` and ``strains``,
+    the membrane grid of the kit folder ``kit``) at up to ``max_frames`` frames spread over the
+    test (:func:`specimen_frames`, coloured by ``colour_by``, displacements times ``magnify``,
+    ``height_px`` high), written as the MP4 ``movie`` at ``fps`` (:func:`write_movie`) and the
+    HTML page ``player`` that plays it (:func:`write_movie_page`); prints what was written."""
+    layout = membrane_layout(load_kit_design(kit))
+    pts = read_table(points, POINTS)
+    local = read_table(strains, STRAINS)
+    frames = chosen_frames(pts["frame"].unique(), max_frames)
+    shown = specimen_frames(
+        pts, layout, local, colour_by=colour_by, frames=frames, height=height_px, magnify=magnify
+    )
+    n = write_movie(shown, movie, fps)
+    write_movie_page(
+        movie,
+        player,
+        f"test {test}: {n} frames of {pts['frame'].nunique()}, coloured by "
+        f"{colour_by}, displacements x{magnify:g}",
+    )
+    print(f"{movie}: {n} frames at {fps} fps ({layout.describe()})")

@@ -7,20 +7,25 @@
   soil surface (:func:`section_areas`);
 * :mod:`~triaxtrack.stress.compute`: q on each area, the lab's standard q, corrections, p, p',
   moduli and uncertainties (:func:`stress_strain`);
-* :func:`measure_stress`: all of it for one test.
+* :func:`measure_stress`: all of it for one test; :func:`run_stress_strain`: the workflow's
+  stage, from the files to the table and the clock report.
 """
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import pandas as pd
 
+from triaxtrack.frames import read_test_yaml
+from triaxtrack.jsonfile import write_json
+from triaxtrack.kit import load_kit_design, target_table
 from triaxtrack.stress.clock import ClockEstimate, estimate_clock_offset, offset_warning
 from triaxtrack.stress.compute import StressConfig, noise_sigma, stress_strain
 from triaxtrack.stress.log import QUANTITIES, read_load_frame_log
 from triaxtrack.stress.sections import SECTION_LEVELS, SECTION_MARGIN, section_areas
-from triaxtrack.tables import STRESS_STRAIN, conform
+from triaxtrack.tables import POINTS, STRESS_STRAIN, VOLUME_RESULT, conform, read_table, write_table
 
 
 def measure_stress(
@@ -85,8 +90,36 @@ def measure_stress(
     return conform(out, STRESS_STRAIN, "stress_strain"), report
 
 
+def run_stress_strain(
+    *,
+    volume: str | Path,
+    points: str | Path,
+    kit: str | Path,
+    test_yaml: str | Path,
+    stress: str | Path,
+    clock: str | Path,
+    stress_cfg: dict,
+    volume_cfg: dict,
+) -> None:
+    """Rule stress_strain: :func:`measure_stress` of the test of ``test_yaml`` (its load-frame
+    log, in the same folder) on its ``volume`` and ``points``, with the kit folder ``kit``
+    (``stress_cfg``, ``volume_cfg``: the config's ``stress`` and ``volume`` sections). Writes the
+    ``stress`` table and the ``clock`` report (JSON), and prints the report and its warning."""
+    design = load_kit_design(kit)
+    table, report = measure_stress(
+        Path(test_yaml).parent, read_test_yaml(test_yaml), read_table(volume, VOLUME_RESULT),
+        read_table(points, POINTS), target_table(design), design, StressConfig.from_dict(stress_cfg),
+        volume_cfg,
+    )  # fmt: skip
+    write_table(table, stress, STRESS_STRAIN)
+    write_json(clock, report)
+    print(json.dumps(report, indent=2))
+    if report["warning"]:
+        print(f"WARNING: {report['warning']}")
+
+
 __all__ = [
     "QUANTITIES", "SECTION_LEVELS", "SECTION_MARGIN", "ClockEstimate", "StressConfig",
     "estimate_clock_offset", "measure_stress", "noise_sigma", "offset_warning", "read_load_frame_log",
-    "section_areas", "stress_strain",
+    "run_stress_strain", "section_areas", "stress_strain",
 ]  # fmt: skip

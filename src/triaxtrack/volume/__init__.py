@@ -76,7 +76,7 @@ from triaxtrack.volume.mesh import (
     specimen_volume,
     write_ply,
 )
-from triaxtrack.volume.series import frame_grid, volume_meshes, volume_series
+from triaxtrack.volume.series import frame_grid, run_measure_volume, volume_meshes, volume_series
 from triaxtrack.volume.strains import strain_field
 from triaxtrack.volume.surface import signed_volume
 from triaxtrack.volume.uncertainty import VolumeUncertainty, volume_uncertainty
@@ -84,7 +84,8 @@ from triaxtrack.volume.uncertainty import VolumeUncertainty, volume_uncertainty
 __all__ = [
     "MAX_MISSING_SHARE", "REFINE_LEVELS", "WARN_MISSING_SHARE", "FaceEnds", "MembraneGrid", "TopCap",
     "VolumeResult", "VolumeUncertainty", "check_mesh", "closed_mesh", "face_ends", "fill_grid",
-    "frame_grid", "membrane_grid", "membrane_thickness", "rigid_fit", "signed_volume", "specimen_volume",
+    "frame_grid", "membrane_grid", "membrane_thickness", "rigid_fit", "run_measure_volume", "signed_volume",
+    "specimen_volume",
     "strain_field", "top_cap", "top_cap_from_membrane", "volume_meshes", "volume_series",
     "volume_uncertainty", "write_ply",
 ]  # fmt: skip

@@ -1,4 +1,5 @@
-"""Volume and strains of every frame of a test, and the PLY meshes of a few (mm, mm^3)."""
+"""Volume and strains of every frame of a test, and the PLY meshes of a few (mm, mm^3); the
+workflow's stage, from the points to the tables and meshes (:func:`run_measure_volume`)."""
 
 from __future__ import annotations
 
@@ -8,7 +9,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from triaxtrack.tables import VOLUME_RESULT, conform
+from triaxtrack.kit import load_kit_design, target_table
+from triaxtrack.tables import POINTS, STRAINS, VOLUME_RESULT, conform, read_table, write_table
 from triaxtrack.volume.cap import TopCap, top_cap, top_cap_from_membrane
 from triaxtrack.volume.grid import (
     MAX_MISSING_SHARE,
@@ -236,3 +238,51 @@ def volume_meshes(
         path = Path(out_dir) / f"frame_{int(frame):06d}.ply"
         write_ply(path, vertices, triangles)
         yield int(frame), path, ""
+
+
+def run_measure_volume(
+    *,
+    points: str | Path,
+    kit: str | Path,
+    volume: str | Path,
+    strains: str | Path,
+    meshes: str | Path,
+    volume_cfg: dict,
+) -> None:
+    """Rule measure_volume: :func:`volume_series` of every frame of ``points`` with the kit
+    folder ``kit`` (``volume_cfg``: the config's ``volume`` section), written to ``volume`` and
+    ``strains``; the PLY meshes of ``volume_cfg["mesh_frames"]`` measured frames spread over the
+    test in the folder ``meshes`` (:func:`volume_meshes`); prints the meshes, a summary and the
+    frames with warnings or failed."""
+    from triaxtrack.report.common import chosen_frames
+
+    cfg = volume_cfg  # the keys below are the config's (config/README.md)
+    design = load_kit_design(kit)
+    table = target_table(design)
+    pts = read_table(points, POINTS)
+    t0, model = cfg["membrane_thickness_mm"], cfg["thickness_model"]
+    share = cfg["max_missing_share"]
+    result, strain = volume_series(
+        pts, table, design, t0=t0, max_missing_share=share, thickness_model=model,
+        warn_missing_share=cfg["warn_missing_share"],
+    )  # fmt: skip
+    write_table(result, volume, VOLUME_RESULT)
+    write_table(strain, strains, STRAINS)
+    good = result.loc[result["reason"] == "", "frame"].tolist()
+    out = Path(meshes)
+    out.mkdir(parents=True, exist_ok=True)
+    chosen = chosen_frames(good, cfg["mesh_frames"])
+    reference = result["reference_frame"].dropna()
+    written = volume_meshes(
+        pts, table, design, chosen, out, t0=t0, thickness_model=model, max_missing_share=share,
+        reference_frame=int(reference.iloc[0]) if len(reference) else None,
+    )  # fmt: skip
+    for frame, path, reason in written:
+        print(f"frame {frame}: {path or 'no mesh: ' + reason}")
+    print(result.drop(columns=["warning", "reason"]).describe().T.to_string())
+    warned = result[result["warning"] != ""]
+    if len(warned):
+        print(f"{len(warned)} frames with warnings:\n{warned[['frame', 'warning']].to_string(index=False)}")
+    failed = result[result["reason"] != ""]
+    if len(failed):
+        print(f"{len(failed)} frames failed:\n{failed[['frame', 'reason']].to_string(index=False)}")
