@@ -46,13 +46,14 @@ over its chunks of tracks in order (:func:`estimate_lag_chunks`: a keyframe's tw
 in different chunks, so a chunk shorter than the GOP is measured and corrected like any other)
 and writes ``results/<test>/codec_lag/<camera>.json`` (:func:`write_lags`, :func:`read_lags`);
 ``triangulate_chunk`` corrects each chunk's tracks with every camera's file
-(:func:`corrected_tracks`). Frames are test frames; pixels in OpenCV's convention.
+(:func:`corrected_tracks`); :func:`run_measure_codec_lag` is that rule's stage. Frames are test
+frames; pixels in OpenCV's convention.
 """
 
 from __future__ import annotations
 
 import json
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -425,3 +426,21 @@ def corrected_tracks(
             fixed = correct_lag(tracks.iloc[pos], *lags[camera])
             out.iloc[pos, out.columns.get_indexer(["u_px", "v_px"])] = fixed[["u_px", "v_px"]].to_numpy()
     return out
+
+
+def run_measure_codec_lag(
+    *, camera: str, tracks: Sequence[str | Path], video: str | Path, frames: str | Path, lags: str | Path
+) -> None:
+    """Rule measure_codec_lag: :func:`estimate_lag_chunks` of one ``camera`` over its chunks'
+    ``tracks`` in order, at every keyframe of its ``video`` (frame map ``frames``), written to
+    ``lags`` (:func:`write_lags`, with a note when nothing could be measured); prints the rows."""
+    from triaxtrack.frames import keyframe_test_frames
+    from triaxtrack.tables import FRAME_MAP, TRACKS, read_table
+
+    fmap = read_table(frames, FRAME_MAP)
+    keys = keyframe_test_frames(video, fmap, 0, len(fmap))
+    found = estimate_lag_chunks((read_table(path, TRACKS) for path in tracks), keys)
+    note = "" if len(found) else "not measured: no keyframe with enough P frames on either side"
+    write_lags(lags, camera, keys, found, note)
+    print(f"{camera}: P frames against keyframes {keys.tolist()} (triaxtrack.codec_lag):")
+    print(note or found.to_string(index=False))

@@ -8,6 +8,8 @@ between neighbouring rows and columns (periodic in theta), mm, cell frame. Point
 ``measured`` (1 for a measured dot, 0 for a filled one) and the Green-Lagrange membrane strains
 ``e_zz``, ``e_tt``, ``e_tz`` (tension positive, :func:`~triaxtrack.volume.strains.strain_field`)
 averaged from the cells around each dot.
+
+The workflow's stages: :func:`run_export_csv` and :func:`run_export_paraview`.
 """
 
 from __future__ import annotations
@@ -194,3 +196,23 @@ def write_paraview_series(frames: Iterator[MembraneFrame | tuple[int, str]], out
         "  <Collection>\n" + "".join(entries) + "  </Collection>\n</VTKFile>\n"
     )
     return {"written": written, "failed": failed}
+
+
+def run_export_csv(*, table: str | Path, csv: str | Path, name: str) -> None:
+    """Rule export_csv: the result ``table`` called ``name`` (``volume`` or ``stress_strain``,
+    read with its schema) as CSV at ``csv`` (:func:`write_csv`)."""
+    from triaxtrack.tables import STRESS_STRAIN, VOLUME_RESULT, read_table
+
+    schema = {"volume": VOLUME_RESULT, "stress_strain": STRESS_STRAIN}[name]
+    write_csv(read_table(table, schema), csv)
+
+
+def run_export_paraview(
+    *, kit: str | Path, volume: str | Path, points: str | Path, series: str | Path, volume_cfg: dict
+) -> None:
+    """Rule export_paraview: the membrane surface of every frame ``volume`` measured
+    (:func:`measured_membrane_frames` of the kit folder ``kit`` and ``points``; ``volume_cfg``:
+    the config's ``volume`` section) as a ParaView series in the folder ``series``
+    (:func:`write_paraview_series`); prints the frames written and those that failed."""
+    done = write_paraview_series(measured_membrane_frames(kit, volume, points, volume_cfg), series)
+    print(f"{len(done['written'])} frames written; failed: {done['failed']}")

@@ -25,7 +25,7 @@ and the map's ``video_time_s`` (the test-clock time the video frame was taken) d
 The frame map is a table (:data:`triaxtrack.tables.FRAME_MAP`), one row per test frame:
 ``frame`` (int, k), ``time_s`` (k / fps), ``video_index`` (int, j; -1 when missing),
 ``missing`` (bool), ``reason`` (``before_start``, ``dropped``, ``after_end`` or ``''``),
-``video_time_s`` (NaN when missing).
+``video_time_s`` (NaN when missing). Rule frame_map writes it (:func:`run_frame_map`).
 """
 
 from __future__ import annotations
@@ -39,7 +39,7 @@ import numpy as np
 import pandas as pd
 import yaml
 
-from triaxtrack.tables import FRAME_MAP, conform
+from triaxtrack.tables import FRAME_MAP, conform, write_table
 from triaxtrack.video import SparseFrames, iter_frames, keyframe_indices, probe_video
 
 SUBFRAME_TOL_FRAMES = 0.05  # |start_offset_s * fps - m| above this: the camera is off the test frames
@@ -305,3 +305,22 @@ def keyframe_test_frames(video_path: str | Path, fmap: pd.DataFrame, start: int,
     video = rec["video_index"].astype(np.int64)
     keys = keyframe_indices(video_path, int(video.min()), int(video.max()) + 1)
     return np.sort(rec.index[video.isin(keys)].to_numpy(np.int64))
+
+
+def run_frame_map(
+    *,
+    camera: str,
+    video: str | Path,
+    test_yaml: str | Path,
+    frame_count_video: str | Path | None,
+    frames: str | Path,
+) -> None:
+    """Rule frame_map: the frame map of ``camera`` (its timing in ``test_yaml``, its ``video``'s
+    frame count) over the test's frames (test.yaml's ``frames``, else ``frame_count_video``'s;
+    :func:`count_test_frames`), written to ``frames``; prints a summary. A camera off the test
+    frames is warned about (:func:`frame_map`)."""
+    timing = read_camera_timing(test_yaml, camera)
+    n = count_test_frames(test_yaml, frame_count_video or None)
+    fmap = frame_map(timing, n, probe_video(video)["frames"])
+    write_table(fmap, frames, FRAME_MAP)
+    print(f"{timing.camera}: {summarize_frame_map(fmap)}, offset residual {timing.offset_residual_s:+.4f} s")

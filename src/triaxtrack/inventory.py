@@ -1,9 +1,14 @@
-"""Inventory of a recorded test: what each camera's video holds, and which cameras disagree."""
+"""Inventory of a recorded test: what each camera's video holds, and which cameras disagree; the
+workflow's stages, one video probed (:func:`run_probe_video`) and the probes summarised
+(:func:`run_inventory`)."""
 
 from __future__ import annotations
 
 from collections import Counter
+from collections.abc import Sequence
 from pathlib import Path
+
+from triaxtrack.jsonfile import read_json, write_json
 
 FPS_REL_TOL = 1e-3  # container frame rates are rationals; 1e-3 absorbs 30000/1001 vs 29.97
 
@@ -106,3 +111,28 @@ def usable_cameras(
         raise ValueError(f"{source}: only {len(kept)} of {len(videos)} cameras can be measured, fewer than "
                          f"min_cameras ({min_cameras}) or 2; left out:{listed or ' none'}")  # fmt: skip
     return kept, problems
+
+
+def run_probe_video(*, video: str | Path, probe: str | Path) -> None:
+    """Rule probe_video: :func:`triaxtrack.video.probe_video` of one recorded ``video`` (every
+    packet demuxed and checked against the index: ValueError naming a broken file), written to
+    ``probe`` as JSON (keys sorted); prints a one-line description."""
+    from triaxtrack.video import probe_video
+
+    info = probe_video(video)
+    write_json(probe, info, sort_keys=True)
+    print(f"{info['path']}: {info['frames']} frames ({info['keyframes']} keyframes), {info['fps']:.6g} fps, "
+          f"{info['width']}x{info['height']}, {info['codec']}")  # fmt: skip
+
+
+def run_inventory(*, probes: Sequence[str | Path], inventory: str | Path, test: dict, name: str) -> None:
+    """Rule inventory: :func:`summarize_probes` of the recorded test ``name`` (``test``: its
+    validated test.yaml) from its cameras' ``probes`` (rule probe_video), stamped with the
+    package's version and written to ``inventory`` (JSON); prints a line per camera."""
+    from triaxtrack import __version__
+
+    summary = summarize_probes(test, [read_json(path, "video probe") for path in probes], name)
+    summary = {**summary, "triaxtrack_version": __version__}
+    write_json(inventory, summary)
+    for c in summary["cameras"]:
+        print(f"{c['camera']}: {c['frames']} frames, {c['fps']:.3f} fps, {c['flags'] or 'ok'}")

@@ -8,9 +8,9 @@ import json
 from pathlib import Path
 
 
-def write_json(path: str | Path, doc: dict) -> None:
-    """Write ``doc`` to ``path`` as JSON, indented by 2."""
-    Path(path).write_text(json.dumps(doc, indent=2))
+def write_json(path: str | Path, doc: dict, sort_keys: bool = False) -> None:
+    """Write ``doc`` to ``path`` as JSON, indented by 2 (its keys sorted with ``sort_keys``)."""
+    Path(path).write_text(json.dumps(doc, indent=2, sort_keys=sort_keys))
 
 
 def read_json(path: str | Path, what: str) -> dict:

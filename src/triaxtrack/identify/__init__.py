@@ -24,7 +24,7 @@ Modules (the method of each step is described in its module):
   dots merged in pairs fitted apart (``quality`` ``MERGED_QUALITY``);
 * :mod:`~triaxtrack.identify.frame`: :func:`identify` (one frame's detections, then the accuracy
   filters), :func:`label_frame`, :func:`label_chunk_start` and :func:`draw_labels`, and the
-  workflow's stage (:func:`run_identify_targets`).
+  workflow's stages (:func:`run_identify_targets`, :func:`run_collect_labels`).
 """
 
 from triaxtrack.identify.anchors import MAX_TAN_PHI, MIN_OVERRULING_PAIRS, settle_offsets
@@ -59,6 +59,7 @@ from triaxtrack.identify.frame import (
     identify,
     label_chunk_start,
     label_frame,
+    run_collect_labels,
     run_identify_targets,
     undistorted_pixels,
 )
@@ -99,6 +100,7 @@ __all__ = [
     "MERGED_FIT_RMS", "MERGED_HEIGHT_RATIO", "MERGED_QUALITY", "MERGED_ROUNDNESS_RATIO",
     "MIN_CHAIN_DOTS", "MIN_OVERRULING_PAIRS", "MIN_SUPPORT", "NEIGHBOURS", "NOT_REACHED",
     "SURFACE_NEIGHBOURS", "UNLABELLED", "WHITE_TOLERANCE", "draw_labels", "ellipse_radius", "grow_chain",
-    "grow_grid", "identify", "label_chunk_start", "label_frame", "local_affine", "run_identify_targets",
+    "grow_grid", "identify", "label_chunk_start", "label_frame", "local_affine", "run_collect_labels",
+    "run_identify_targets",
     "settle_offsets", "undistorted_jacobians", "undistorted_pixels",
 ]  # fmt: skip

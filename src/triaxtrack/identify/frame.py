@@ -1,12 +1,13 @@
 """One frame's identification (:func:`identify`, the steps in order, then the accuracy filters),
 detection and identification of a grey frame (:func:`label_frame`), the chunk start's labels
 (:func:`label_chunk_start`) and a picture of them for a person to check (:func:`draw_labels`);
-the workflow's stage, from the files to the labels and pictures (:func:`run_identify_targets`).
+the workflow's stages, from the files to the labels and pictures (:func:`run_identify_targets`)
+and every chunk's labels in one table (:func:`run_collect_labels`).
 The method is described in :mod:`triaxtrack.identify`."""
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -37,7 +38,7 @@ from triaxtrack.identify.membrane import (
 from triaxtrack.identify.merged import _recentred_beside_edge, _split_merged_pairs
 from triaxtrack.identify.state import LABEL_COLUMNS, NOT_REACHED, UNLABELLED, IdentifyParams, _Frame
 from triaxtrack.kit import ct_codes, load_kit_design, target_table
-from triaxtrack.tables import FRAME_MAP, LABELS, read_table, write_table
+from triaxtrack.tables import FRAME_MAP, LABELS, concat_tables, read_table, write_table
 
 # a membrane dot beside a dark edge this much less round than its grid neighbours (seen at the
 # same angle) has merged with the edge's fringe: on the demo one at 0.52 was 1.4 px off; 0.45 %
@@ -383,3 +384,12 @@ def run_identify_targets(
         f"{(got.id < 0).sum()} detections left unlabelled:"
     )
     print(got[got.id < 0].reason.value_counts().to_string())
+
+
+def run_collect_labels(*, chunk_labels: Sequence[str | Path], labels: str | Path) -> None:
+    """Rule collect_labels: every camera's chunk labels (``chunk_labels``, rule
+    identify_targets) of a test in one ``labels`` table; prints the counts."""
+    got = concat_tables(chunk_labels, LABELS)
+    write_table(got, labels, LABELS)
+    found = got[got.id > 0]
+    print(f"{len(found)} labels in {got.groupby(['camera', 'frame']).ngroups} camera frames")

@@ -4,19 +4,23 @@ Young's modulus against axial strain, from ``stress_strain.parquet``
 
 Conventions: strains compression positive, drawn in per cent; stresses and moduli in kPa and
 MPa; the measured axial strain (the cameras' top cap) on the x axes unless a series says
-otherwise; bands are +- 1 standard uncertainty.
+otherwise; bands are +- 1 standard uncertainty. The workflow's stage, from the table to the
+PNG files: :func:`run_stress_figures`.
 """
 
 from __future__ import annotations
+
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 
-from triaxtrack.report.style import PALETTE, new_figure, no_data, styled
+from triaxtrack.report.style import PALETTE, new_figure, no_data, save_figure, styled
+from triaxtrack.tables import STRESS_STRAIN, read_table
 
-__all__ = ["modulus_figure", "q_strain_figure", "volumetric_figure"]
+__all__ = ["modulus_figure", "q_strain_figure", "run_stress_figures", "volumetric_figure"]
 
 
 def _finite(*arrays: np.ndarray) -> bool:
@@ -98,3 +102,14 @@ def modulus_figure(stress: pd.DataFrame, width_px: int = 900, height_px: int = 4
     ax.set_ylim(0, 1.1 * top)
     ax.legend(loc="upper right")
     return fig
+
+
+def run_stress_figures(
+    *, stress: str | Path, q_strain_png: str | Path, volumetric_png: str | Path, modulus_png: str | Path
+) -> None:
+    """Rule stress_figures: :func:`q_strain_figure`, :func:`volumetric_figure` and
+    :func:`modulus_figure` of the ``stress`` table (``stress_strain.parquet``), as PNG files."""
+    table = read_table(stress, STRESS_STRAIN)
+    save_figure(q_strain_figure(table), q_strain_png)
+    save_figure(volumetric_figure(table), volumetric_png)
+    save_figure(modulus_figure(table), modulus_png)

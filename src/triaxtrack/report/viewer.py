@@ -1,12 +1,15 @@
 """A self-contained 3-D viewer of the specimen (:func:`viewer_html`): one offline HTML page
 (plotly, its JavaScript inlined, nothing fetched from the network) showing the membrane surface
-coloured by a strain component, with a time slider over the processed frames."""
+coloured by a strain component, with a time slider over the processed frames; the workflow's
+stage, from a test's files to the page (:func:`run_specimen_viewer`)."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 
-from triaxtrack.export import MembraneFrame, grid_quads
+from triaxtrack.export import MembraneFrame, grid_quads, measured_membrane_frames
 
 STRAIN_LABELS = {"e_zz": "axial strain e_zz (%)", "e_tt": "circumferential strain e_tt (%)",
                  "e_tz": "shear strain e_tz (%)"}  # fmt: skip
@@ -81,3 +84,25 @@ def viewer_html(
     )  # fmt: skip
     return fig.to_html(include_plotlyjs=True, full_html=True, include_mathjax=False,
                        config={"displaylogo": False})  # fmt: skip
+
+
+def run_specimen_viewer(
+    *,
+    volume: str | Path,
+    points: str | Path,
+    kit: str | Path,
+    html: str | Path,
+    colour_by: str,
+    max_frames: int,
+    volume_cfg: dict,
+    name: str,
+) -> None:
+    """Rule specimen_viewer: :func:`viewer_html` titled ``name`` of up to ``max_frames`` of the
+    frames ``volume`` measured (:func:`~triaxtrack.export.measured_membrane_frames` of the kit
+    folder ``kit`` and ``points``; ``volume_cfg``: the config's ``volume`` section), coloured by
+    ``colour_by``, written to ``html``; prints how many frames it shows."""
+    series = list(measured_membrane_frames(kit, volume, points, volume_cfg, max_frames))
+    shown = [f for f in series if isinstance(f, MembraneFrame)]
+    skipped = [f for f in series if not isinstance(f, MembraneFrame)]
+    Path(html).write_text(viewer_html(shown, colour_by, name, skipped))
+    print(f"viewer: {len(shown)} of {len(series)} frames")
