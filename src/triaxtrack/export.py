@@ -107,9 +107,11 @@ def membrane_frames(
         yield MembraneFrame(int(frame), float(pf["time_s"].iloc[0]), xyz, data)
 
 
-
 def measured_membrane_frames(
-    kit_dir: str | Path, volume_path: str | Path, points_path: str | Path, volume_cfg: dict,
+    kit_dir: str | Path,
+    volume_path: str | Path,
+    points_path: str | Path,
+    volume_cfg: dict,
     max_frames: int | None = None,
 ) -> Iterator[MembraneFrame | tuple[int, str]]:
     """:func:`membrane_frames` of the frames ``volume.parquet`` measured (at most ``max_frames``
@@ -132,6 +134,7 @@ def measured_membrane_frames(
         int(reference.iloc[0]) if len(reference) else -1, t0=volume_cfg["membrane_thickness_mm"],
         max_missing_share=volume_cfg["max_missing_share"],
     )  # fmt: skip
+
 
 def grid_quads(n_r: int, n_c: int) -> np.ndarray:
     """(M, 4) int64 quads of a (R, C) grid stored row-major, periodic in C (outward for rows
