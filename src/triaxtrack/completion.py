@@ -13,10 +13,13 @@ spacings (a cell band's edge would cut its image); and where the dot is seen wit
 (``MIN_VIEW_COS``: the fitted column step over the row step against the kit's pitches; near a
 silhouette a centroid is biased and the columns crowd). The dot's window is measured there
 (:func:`triaxtrack.window.measure_windows`); a blob is its dot where it is clean (not merged,
-lost or at the edge), within the gate of the prediction (``gate`` x its distance to the nearest
+lost or at the edge), within the gate of the prediction (``gate`` x the distance of its nearest
 neighbour), no reported target sits within ``min_separation`` of that distance of it, and its
-normalised mass is within ``MASS_RATIO`` of the median reported dot's. A dot that passes in
-``CONFIRM_FRAMES`` measured frames in a row is taken on. Pixels in OpenCV's convention.
+normalised mass is within ``MASS_RATIO`` of the median reported dot's. The dots that pass then
+count as reported for the next ring within the same frame, between rows on both sides, so a
+patch grows inward from its edges in one frame. A dot that passes in ``CONFIRM_FRAMES``
+measured frames in a row is taken on, its spacing (for the tracker's checks) the shorter fitted
+step of the grid there. Pixels in OpenCV's convention.
 """
 
 from __future__ import annotations
@@ -36,6 +39,7 @@ MIN_GRID_NEIGHBOURS = 6  # reported neighbours needed (at least one on each side
 MASS_RATIO = 3.0  # a blob whose mass is over this ratio from the median dot's is not a dot (large
 # dots are about 1.6 times the small ones' area: within it; a fragment or a merged pair is not)
 CONFIRM_FRAMES = 2  # measured frames in a row in which a dot must pass before it is taken on
+GROWTH_ROUNDS = 30  # rings a hidden patch grows inward within one frame, at most
 BAND_REACH = 2.0  # x its spacing: a dot this near a cell-wall target is beside (or behind) a cell
 # band, whose edge cuts its image: identification, which knows the bands, labels it or not
 MIN_VIEW_COS = 0.5  # a dot seen more obliquely than 60 degrees (its image squeezed across the
@@ -73,20 +77,13 @@ class Candidates(NamedTuple):
 
 
 def grid_candidates(grid: np.ndarray, followed: np.ndarray) -> Candidates:
-    """The dots of ``grid`` (:func:`dot_grid` ``ids``) whose IDs are not in ``followed`` but
-    with at least ``MIN_GRID_NEIGHBOURS`` followed ones within ``GRID_REACH`` rows and columns
-    (the others cannot be placed; columns wrap around), but for its end rows (beside the
-    pedestals' dark faces, which a blurred dot merges with)."""
-    seen = np.isin(grid, followed)
-    padded = np.pad(seen, ((GRID_REACH, GRID_REACH), (0, 0))).astype(np.int64)
-    near = -seen.astype(np.int64)  # the dot itself is not its own neighbour
-    for dr in range(2 * GRID_REACH + 1):
-        rows = padded[dr : dr + grid.shape[0]]
-        for dc in range(-GRID_REACH, GRID_REACH + 1):
-            near += np.roll(rows, dc, axis=1)
+    """The dots of ``grid`` (:func:`dot_grid` ``ids``) whose IDs are not in ``followed``, but
+    for its end rows (beside the pedestals' dark faces, which a blurred dot merges with): each
+    frame, those with enough reported neighbours are placed (:func:`complete_grid`, which grows
+    inward from them), the others wait."""
     inner = np.zeros(grid.shape, bool)
     inner[1:-1] = True
-    row, col = np.nonzero(inner & ~seen & (near >= MIN_GRID_NEIGHBOURS))
+    row, col = np.nonzero(inner & ~np.isin(grid, followed))
     row, col = row.astype(np.int64), col.astype(np.int64)
     return Candidates(grid[row, col], row, col, np.zeros(len(row), np.int64))
 
@@ -94,16 +91,20 @@ def grid_candidates(grid: np.ndarray, followed: np.ndarray) -> Candidates:
 @numba.njit(cache=True)
 def _interpolate(
     row: np.ndarray, col: np.ndarray, where: np.ndarray, uv: np.ndarray, radius: np.ndarray, reach: int,
-    min_count: int,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
-    """Per candidate: (predicted uv (m, 2), fit RMS (m,), nearest neighbour's distance (m,),
+    min_count: int, one_sided: bool = True,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
+    """Per candidate: (predicted uv (m, 2), fit RMS (m,), the nearest neighbour's distance (m,),
+    the grid's spacing there (m,: the shorter fitted row or column step; the neighbours may all
+    be two rows away),
     largest neighbour radius (m,), the fitted column step's length over the row step's (m,));
     NaN where fewer than ``min_count`` neighbours with a position in ``uv`` (indexed by
-    ``where`` (rows, columns), -1: none), or not placed as the module docstring says."""
+    ``where`` (rows, columns), -1: none), or not placed as the module docstring says (with
+    ``one_sided`` False, only between rows on both sides)."""
     m = len(row)
     rows, cols = where.shape
     pred = np.full((m, 2), np.nan)
     rms, near, rad, squeeze = np.full(m, np.nan), np.full(m, np.nan), np.full(m, np.nan), np.full(m, np.nan)
+    step = np.full(m, np.nan)
     a, rhs = np.empty((3, 3)), np.empty((3, 2))
     size = (2 * reach + 1) ** 2
     du, dv, uu, vv = np.empty(size), np.empty(size), np.empty(size), np.empty(size)
@@ -126,10 +127,16 @@ def _interpolate(
                 left, right = left or dc < 0, right or dc > 0
                 big = max(big, radius[j])
         above, below = side[:reach].sum() > 0, side[reach + 1 :].sum() > 0
-        # rows: between reported rows, or the next row beyond two reported ones (a band is filled
-        # row by row from its edges); columns: between reported ones
-        rows_ok = (above and below) or (side[reach - 1] > 0 and side[reach - 2] > 0) or (
-            side[reach + 1] > 0 and side[reach + 2] > 0
+        # rows: between reported rows, or (one_sided) the next row beyond two reported ones (a band
+        # is filled row by row from its edges); columns: between reported ones
+        rows_ok = (
+            (
+                (above and below)
+                or (side[reach - 1] > 0 and side[reach - 2] > 0)
+                or (side[reach + 1] > 0 and side[reach + 2] > 0)
+            )
+            if one_sided
+            else (above and below)
         )
         if k < min_count or not (rows_ok and left and right):
             continue
@@ -151,16 +158,18 @@ def _interpolate(
             res += eu * eu + ev * ev
             dist = min(dist, np.hypot(uu[q] - rhs[2, 0], vv[q] - rhs[2, 1]))
         pred[i, 0], pred[i, 1] = rhs[2, 0], rhs[2, 1]
+        step_row, step_col = np.hypot(rhs[0, 0], rhs[0, 1]), np.hypot(rhs[1, 0], rhs[1, 1])
         rms[i], near[i], rad[i] = np.sqrt(res / k), dist, big
-        squeeze[i] = np.hypot(rhs[1, 0], rhs[1, 1]) / np.hypot(rhs[0, 0], rhs[0, 1])
-    return pred, rms, near, rad, squeeze
+        step[i] = min(step_row, step_col)
+        squeeze[i] = step_col / step_row
+    return pred, rms, near, step, rad, squeeze
 
 
 class Found(NamedTuple):
     """The candidates taken on in one frame, and their measurement there."""
 
     ids: np.ndarray  # (k,) int64
-    spacing: np.ndarray  # (k,) distance to the nearest reported neighbour, pixels
+    spacing: np.ndarray  # (k,) the grid's spacing there (the shorter fitted step), pixels
     radius: np.ndarray  # (k,) disc radius, pixels
     meas: WindowMeasure  # their windows' measurement (k rows)
 
@@ -185,29 +194,71 @@ def complete_grid(
     (n, 2: reported centroids this frame, NaN where not), ``radius`` (n,) and ``mass`` (n,:
     normalised, NaN where not reported) of each dot of the grid, -1 where none; ``measure``:
     ``(gray, uv (k, 2), radius (k,)) -> WindowMeasure`` (k may be 0); ``aspect``: the grid's
-    (:class:`DotGrid`); ``cell_uv`` (c, 2): the cell-wall targets reported this frame."""
-    pred, rms, near, rad, squeeze = _interpolate(
-        cand.row, cand.col, grid_index, uv, radius, GRID_REACH, MIN_GRID_NEIGHBOURS
-    )
-    tried = np.isfinite(pred).all(axis=1) & (rms <= max_fit_px) & (squeeze >= MIN_VIEW_COS * aspect)
-    if cell_uv is not None and len(cell_uv) and tried.any():  # not beside a cell band
-        d, _ = cKDTree(cell_uv).query(np.nan_to_num(pred))
-        tried &= d > BAND_REACH * near
-    streak = np.where(tried, cand.streak, 0)
-    k = np.nonzero(tried)[0]
-    meas = measure(gray, pred[k], rad[k])
-    ok = (meas.reason == "") & (np.linalg.norm(meas.uv - pred[k], axis=1) <= gate * near[k])
-    reported = uv[np.isfinite(uv).all(axis=1)]
-    if len(reported) and ok.any():
-        d, _ = cKDTree(reported).query(np.nan_to_num(meas.uv))
-        ok &= d >= min_separation * near[k]
+    (:class:`DotGrid`); ``cell_uv`` (c, 2): the cell-wall targets reported this frame.
+
+    Within the frame the grid grows inward ring by ring (at most ``GROWTH_ROUNDS``): a candidate
+    that passes places the next, as a reported dot would, but only between rows on both sides
+    (the growth fills a patch; a row beyond the last reported one is still added from reported
+    dots alone, one a frame). So a patch hidden at the labelled frame (an occluder) is taken on
+    within ``CONFIRM_FRAMES`` frames of being seen again, where it took a ring every
+    ``CONFIRM_FRAMES`` frames from its edges. A taken-on dot's spacing is the grid's fitted
+    step (its nearest neighbour when placed may have been two rows away: the tracker then took
+    its neighbours for the same dot, "ambiguous")."""
     typical = np.nanmedian(mass) if np.isfinite(mass).any() else np.nan
-    with np.errstate(invalid="ignore", divide="ignore"):
-        ok &= np.abs(np.log(meas.mass / typical)) <= np.log(MASS_RATIO)
-    streak[k] = np.where(ok, streak[k] + 1, 0)
-    sel = ok & (streak[k] >= CONFIRM_FRAMES)
-    take = k[sel]
-    found = Found(cand.ids[take], near[take], rad[take], WindowMeasure(*(a[sel] for a in meas)))
-    keep = np.ones(len(cand.ids), bool)
-    keep[take] = False
-    return Candidates(cand.ids[keep], cand.row[keep], cand.col[keep], streak[keep]), found
+    passed = np.zeros(len(cand.ids), bool)
+    parts: list[tuple[np.ndarray, np.ndarray, np.ndarray, WindowMeasure]] = []  # (which, step, rad, meas)
+    index, at, rad_of = grid_index.copy(), uv, radius
+    known = uv[np.isfinite(uv).all(axis=1)]
+    for growth in range(GROWTH_ROUNDS):
+        which = np.nonzero(~passed)[0]
+        pred, rms, near, step, rad, squeeze = _interpolate(
+            cand.row[which], cand.col[which], index, at, rad_of, GRID_REACH, MIN_GRID_NEIGHBOURS, growth == 0
+        )
+        tried = np.isfinite(pred).all(axis=1) & (rms <= max_fit_px) & (squeeze >= MIN_VIEW_COS * aspect)
+        if cell_uv is not None and len(cell_uv) and tried.any():  # not beside a cell band
+            d, _ = cKDTree(cell_uv).query(np.nan_to_num(pred))
+            tried &= d > BAND_REACH * near
+        k = np.nonzero(tried)[0]
+        if not len(k):
+            break
+        meas = measure(gray, pred[k], rad[k])
+        ok = (meas.reason == "") & (np.linalg.norm(meas.uv - pred[k], axis=1) <= gate * near[k])
+        if len(known) and ok.any():  # not on a reported target (nor one taken on this round)
+            d, _ = cKDTree(known).query(np.nan_to_num(meas.uv))
+            ok &= d >= min_separation * near[k]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            ok &= np.abs(np.log(meas.mass / typical)) <= np.log(MASS_RATIO)
+        if not ok.any():
+            break
+        new = which[k[ok]]
+        passed[new] = True
+        parts.append((new, step[k[ok]], rad[k[ok]], WindowMeasure(*(a[ok] for a in meas))))
+        # the passed dots place the next ring, as reported dots
+        index[cand.row[new], cand.col[new]] = len(at) + np.arange(len(new))
+        at, rad_of = np.r_[at, meas.uv[ok]], np.r_[rad_of, rad[k[ok]]]
+        known = np.r_[known, meas.uv[ok]]
+    streak = np.where(passed, cand.streak + 1, 0)
+    sel = passed & (streak >= CONFIRM_FRAMES)
+    found = _found(cand.ids, sel, parts)
+    return Candidates(cand.ids[~sel], cand.row[~sel], cand.col[~sel], streak[~sel]), found
+
+
+def _found(ids: np.ndarray, sel: np.ndarray, parts: list) -> Found:
+    """The candidates ``sel`` (of ``ids``) taken on, with their measurements from the growth's
+    rounds ``parts`` ((candidate indices, the grid's spacing, radius, WindowMeasure)),
+    in candidate order."""
+    if not parts:
+        empty = np.zeros(0)
+        return Found(
+            ids[:0], empty, empty, WindowMeasure(np.zeros((0, 2)), *([empty] * 6), np.zeros(0, object))
+        )
+    which = np.concatenate([p[0] for p in parts])
+    order = np.argsort(which)
+    take = sel[which[order]]
+    rows = order[take]
+    spacing = np.concatenate([p[1] for p in parts])[rows]
+    rad = np.concatenate([p[2] for p in parts])[rows]
+    meas = WindowMeasure(
+        *(np.concatenate([getattr(p[3], f) for p in parts])[rows] for f in WindowMeasure._fields)
+    )
+    return Found(ids[which[rows]], spacing, rad, meas)

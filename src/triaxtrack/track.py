@@ -490,7 +490,7 @@ def track_frames(
         uv, area, sigma, reason = _step(state, gray, cfg, first=i == 0)
         if cand is not None and gray is not None:
             cand, found = _complete(state, gray, cand, grid, uv, cfg)
-            if len(found.ids):  # reported in this frame; more dots can be placed now
+            if len(found.ids):  # reported in this frame; the streaks start again (conservative)
                 cand = grid_candidates(grid.ids, state.ids)
                 new = found.meas
                 uv, area, sigma = np.r_[uv, new.uv], np.r_[area, new.area], np.r_[sigma, new.sigma_px]
