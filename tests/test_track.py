@@ -18,12 +18,12 @@ from triaxtrack.timesteps import (
 )
 from triaxtrack.track import (
     TrackingConfig,
-    chunk_frames,
     measure_blobs,
     measure_targets,
     processed_frames,
     track_frames,
 )
+from triaxtrack.track_stage import chunk_frames
 
 W, H = 360, 240
 SS = 8  # supersampling of the renderer

@@ -154,3 +154,30 @@ def unwrap_motion(
         if m >= min_count:
             agree[i] = (motion[i, 0] - cu) ** 2 + (motion[i, 1] - cv) ** 2 <= tol[i] ** 2
     return motion, agree
+
+
+def reference_places(
+    ref_uv: np.ndarray,
+    last_uv: np.ndarray,
+    reported: np.ndarray,
+    nb: np.ndarray,
+    first_new: int,
+    min_count: int,
+) -> np.ndarray:
+    """A copy of ``ref_uv`` (n, 2) with the reference places of the targets from ``first_new`` on
+    (just taken on, seen at ``last_uv``) moved to where the affine motion of their ``reported``
+    neighbours (``nb``, as :func:`affine_flow`) since the reference frame puts them, evaluated
+    twice (the motion is taken at the place it gives). A dot taken on a few spacings from its
+    nearest reported neighbours (inside a patch that was hidden) placed by their median
+    displacement is off their motion by its gradient over that reach, and the tracker's flow
+    check then drops it as drifting (on a 6-frame test at 1 % strain: 58 of 69 dots the frame
+    after)."""
+    ref = np.array(ref_uv, dtype=np.float64, copy=True)
+    disp = np.asarray(last_uv, np.float64) - ref
+    new = np.arange(first_new, len(ref))
+    for _ in range(2):
+        flow, valid = affine_flow(ref, disp, np.asarray(reported, np.bool_), nb, min_count)
+        ok = new[valid[new]]
+        ref[ok] = last_uv[ok] - flow[ok]
+        disp[ok] = flow[ok]
+    return ref

@@ -75,7 +75,7 @@ from scipy.spatial import cKDTree
 
 from triaxtrack.completion import Candidates, DotGrid, Found, complete_grid, grid_candidates
 from triaxtrack.detect import DetectParams
-from triaxtrack.neighbour_motion import affine_flow, unwrap_motion
+from triaxtrack.neighbour_motion import affine_flow, reference_places, unwrap_motion
 from triaxtrack.window import WindowMeasure, measure_windows
 
 NEIGHBOURS = 12  # same-kind neighbours whose motion predicts a target's (local affine flow)
@@ -561,39 +561,12 @@ def _adopt(state: _State, found: Found, reported: np.ndarray) -> None:
     for name, value in grow.items():
         old = getattr(state, name)
         setattr(state, name, np.concatenate([old, np.asarray(value, old.dtype)]))
-
-
-@dataclass(frozen=True)
-class ChunkPlan:
-    """The frames one camera's chunk decodes and reports."""
-
-    first: int  # the labelled frame (the camera's first recorded frame of the chunk)
-    end: int  # decode frames first..end-1 (the chunk, and the next chunk's first frame)
-    report: np.ndarray  # processed frames of the chunk, and the handover frame
-    handover: int  # the frame shared with the next chunk (-1 for the last chunk)
-
-
-def chunk_frames(
-    labels: pd.DataFrame,
-    fmap: pd.DataFrame,
-    fps: float,
-    chunk: dict,
-    cfg: TrackingConfig,
-    source: str = "labels",
-) -> ChunkPlan:
-    """What a chunk ``{'start', 'stop'}`` (stop exclusive) of a test with frame map ``fmap``
-    tracks, from its ``labels`` (one frame). ValueError naming ``source`` if the labels are of
-    no frame of the chunk."""
-    n = len(fmap)
-    start, stop = int(chunk["start"]), int(chunk["stop"])
-    frames = labels["frame"].unique()
-    if len(frames) != 1 or not start <= int(frames[0]) < stop:
-        raise ValueError(f"{source}: expected the labels of one frame of the chunk {start}..{stop - 1}, "
-                         f"got frames {sorted(int(f) for f in frames)}")  # fmt: skip
-    first = int(frames[0])
-    handover = stop if stop < n else -1
-    proc = processed_frames(n, fps, cfg.step_s)
-    report = proc[(proc >= first) & (proc < stop)]
-    if handover >= 0:
-        report = np.r_[report, handover]
-    return ChunkPlan(first, stop + 1 if handover >= 0 else stop, report, handover)
+    # where their reported neighbours' affine motion puts them, not their median's
+    state.ref_uv = reference_places(
+        state.ref_uv,
+        state.last_uv,
+        np.r_[reported, np.zeros(m, bool)],
+        state.neighbours,
+        n,
+        MIN_FLOW_NEIGHBOURS,
+    )

@@ -5,14 +5,54 @@ its video and labels to its tracks and the handover to the next chunk
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass
 from pathlib import Path
+
+import numpy as np
+import pandas as pd
 
 from triaxtrack.completion import dot_grid
 from triaxtrack.frames import ProcessedTestFrames, iter_test_frames, read_test_fps
 from triaxtrack.kit import load_kit_design
 from triaxtrack.tables import FRAME_MAP, LABELS, TRACKS, read_table, write_table
 from triaxtrack.timesteps import tracking_summary
-from triaxtrack.track import TrackingConfig, chunk_frames, track_frames
+from triaxtrack.track import TrackingConfig, processed_frames, track_frames
+
+
+@dataclass(frozen=True)
+class ChunkPlan:
+    """The frames one camera's chunk decodes and reports."""
+
+    first: int  # the labelled frame (the camera's first recorded frame of the chunk)
+    end: int  # decode frames first..end-1 (the chunk, and the next chunk's first frame)
+    report: np.ndarray  # processed frames of the chunk, and the handover frame
+    handover: int  # the frame shared with the next chunk (-1 for the last chunk)
+
+
+def chunk_frames(
+    labels: pd.DataFrame,
+    fmap: pd.DataFrame,
+    fps: float,
+    chunk: dict,
+    cfg: TrackingConfig,
+    source: str = "labels",
+) -> ChunkPlan:
+    """What a chunk ``{'start', 'stop'}`` (stop exclusive) of a test with frame map ``fmap``
+    tracks, from its ``labels`` (one frame). ValueError naming ``source`` if the labels are of
+    no frame of the chunk."""
+    n = len(fmap)
+    start, stop = int(chunk["start"]), int(chunk["stop"])
+    frames = labels["frame"].unique()
+    if len(frames) != 1 or not start <= int(frames[0]) < stop:
+        raise ValueError(f"{source}: expected the labels of one frame of the chunk {start}..{stop - 1}, "
+                         f"got frames {sorted(int(f) for f in frames)}")  # fmt: skip
+    first = int(frames[0])
+    handover = stop if stop < n else -1
+    proc = processed_frames(n, fps, cfg.step_s)
+    report = proc[(proc >= first) & (proc < stop)]
+    if handover >= 0:
+        report = np.r_[report, handover]
+    return ChunkPlan(first, stop + 1 if handover >= 0 else stop, report, handover)
 
 
 def run_track_targets(
@@ -31,7 +71,7 @@ def run_track_targets(
     """Rule track_targets: follow the targets ``camera`` labelled at the first frame of
     ``chunk`` (``{'start', 'stop'}``, stop exclusive; ``labels``) through the chunk of its
     ``video`` (frame map ``frames``, ``test_yaml``'s fps) and on to the next chunk's first frame
-    (:func:`~triaxtrack.track.chunk_frames`, :func:`~triaxtrack.track.track_frames`).
+    (:func:`chunk_frames`, :func:`~triaxtrack.track.track_frames`).
     ``tracking_cfg``: the config's ``tracking`` section; with ``step_s`` and ``fast`` only the
     processed frames are decoded, with ``complete_grid`` the kit's (folder ``kit``) membrane
     dots not labelled are taken on. Writes the chunk's ``tracks`` and, apart, the ``handover``
