@@ -550,3 +550,25 @@ def test_observations_hold_the_pixels_the_triangulation_used():
     assert list(obs.index) == [101, 1001]
     assert obs.loc[1001, ["u_px", "v_px"]].tolist() == [20.04, 5.97] and obs.loc[1001, "used"]
     assert obs.loc[101, ["u_px", "v_px"]].tolist() == [10.0, 5.0] and not obs.loc[101, "used"]
+
+
+def test_a_dot_taken_on_far_from_its_neighbours_is_placed_on_their_affine_motion():
+    """Neighbours on a ring 30 px around, displaced by a stretch (2 % in v about the origin):
+    the new dot's reference place is where that motion puts it, not their median displacement
+    (off by the stretch over the reach, which the flow check calls drift)."""
+    from triaxtrack.neighbour_motion import reference_places
+
+    angles = np.linspace(0, 2 * np.pi, 8, endpoint=False)
+    ref = np.c_[30 * np.cos(angles), 100 + 30 * np.sin(angles)]  # reference places, px
+    stretch = np.array([[1.0, 0.0], [0.0, 1.02]])
+    last = ref @ stretch.T
+    truth_ref = np.array([[5.0, 80.0]])  # 20 px off the ring's centre
+    new_last = truth_ref @ stretch.T
+    median = new_last - np.median(last - ref, axis=0)
+    nb = np.r_[np.full((8, 8), 9), [np.arange(8)]]  # the new dot (row 8) sees the ring; 9 (n): none
+    got = reference_places(
+        np.r_[ref, median], np.r_[last, new_last], np.r_[np.ones(8, bool), False], nb, 8, 4
+    )
+    assert np.abs(median - truth_ref).max() > 0.3  # the median misplaces it by 2 % of 20 px
+    assert np.abs(got[8] - truth_ref[0]).max() < 1e-3
+    assert np.array_equal(got[:8], ref)  # the others are left where they were
