@@ -77,15 +77,35 @@ class Candidates(NamedTuple):
 
 
 def grid_candidates(grid: np.ndarray, followed: np.ndarray) -> Candidates:
-    """The dots of ``grid`` (:func:`dot_grid` ``ids``) whose IDs are not in ``followed``, but
-    for its end rows (beside the pedestals' dark faces, which a blurred dot merges with): each
-    frame, those with enough reported neighbours are placed (:func:`complete_grid`, which grows
-    inward from them), the others wait."""
-    inner = np.zeros(grid.shape, bool)
-    inner[1:-1] = True
-    row, col = np.nonzero(inner & ~np.isin(grid, followed))
+    """The dots of ``grid`` (:func:`dot_grid` ``ids``) whose IDs are not in ``followed`` but
+    with at least ``MIN_GRID_NEIGHBOURS`` followed ones within ``GRID_REACH`` rows and columns
+    (the others cannot be placed from followed dots; :func:`complete_grid` reaches them by
+    growing from the dots it places), but for its end rows (beside the pedestals' dark faces,
+    which a blurred dot merges with)."""
+    seen = np.isin(grid, followed)
+    near = _near_count(seen) - seen  # the dot itself is not its own neighbour
+    row, col = np.nonzero(_inner(grid.shape) & ~seen & (near >= MIN_GRID_NEIGHBOURS))
     row, col = row.astype(np.int64), col.astype(np.int64)
     return Candidates(grid[row, col], row, col, np.zeros(len(row), np.int64))
+
+
+def _inner(shape: tuple[int, ...]) -> np.ndarray:
+    """All but the grid's end rows."""
+    inner = np.zeros(shape, bool)
+    inner[1:-1] = True
+    return inner
+
+
+def _near_count(mask: np.ndarray) -> np.ndarray:
+    """Per grid cell, the cells of ``mask`` within ``GRID_REACH`` rows and columns (itself
+    included; columns wrap around the specimen, rows do not)."""
+    padded = np.pad(mask, ((GRID_REACH, GRID_REACH), (0, 0))).astype(np.int64)
+    near = np.zeros(mask.shape, np.int64)
+    for dr in range(2 * GRID_REACH + 1):
+        rows = padded[dr : dr + mask.shape[0]]
+        for dc in range(-GRID_REACH, GRID_REACH + 1):
+            near += np.roll(rows, dc, axis=1)
+    return near
 
 
 @numba.njit(cache=True)
@@ -188,13 +208,16 @@ def complete_grid(
     min_separation: float,
     max_fit_px: float,
     cell_uv: np.ndarray | None = None,
+    grid_ids: np.ndarray | None = None,
 ) -> tuple[Candidates, Found]:
     """One frame of completion (module docstring): the candidates with their streaks updated,
     and the ones taken on. ``grid_index`` (rows, columns): the followed target's row in ``uv``
     (n, 2: reported centroids this frame, NaN where not), ``radius`` (n,) and ``mass`` (n,:
     normalised, NaN where not reported) of each dot of the grid, -1 where none; ``measure``:
     ``(gray, uv (k, 2), radius (k,)) -> WindowMeasure`` (k may be 0); ``aspect``: the grid's
-    (:class:`DotGrid`); ``cell_uv`` (c, 2): the cell-wall targets reported this frame.
+    (:class:`DotGrid`); ``cell_uv`` (c, 2): the cell-wall targets reported this frame;
+    ``grid_ids`` (rows, columns): the grid's IDs (:class:`DotGrid` ``ids``), without which the
+    grid does not grow within the frame.
 
     Within the frame the grid grows inward ring by ring (at most ``GROWTH_ROUNDS``): a candidate
     that passes places the next, as a reported dot would, but only between rows on both sides
@@ -205,14 +228,16 @@ def complete_grid(
     step (its nearest neighbour when placed may have been two rows away: the tracker then took
     its neighbours for the same dot, "ambiguous")."""
     typical = np.nanmedian(mass) if np.isfinite(mass).any() else np.nan
-    passed = np.zeros(len(cand.ids), bool)
+    ids, row, col, streak0 = cand
+    passed = np.zeros(len(ids), bool)
+    measured = np.zeros(len(ids), bool)  # a blob that failed is not measured again this frame
     parts: list[tuple[np.ndarray, np.ndarray, np.ndarray, WindowMeasure]] = []  # (which, step, rad, meas)
     index, at, rad_of = grid_index.copy(), uv, radius
     known = uv[np.isfinite(uv).all(axis=1)]
     for growth in range(GROWTH_ROUNDS):
-        which = np.nonzero(~passed)[0]
+        which = np.nonzero(~passed & ~measured)[0]
         pred, rms, near, step, rad, squeeze = _interpolate(
-            cand.row[which], cand.col[which], index, at, rad_of, GRID_REACH, MIN_GRID_NEIGHBOURS, growth == 0
+            row[which], col[which], index, at, rad_of, GRID_REACH, MIN_GRID_NEIGHBOURS, growth == 0
         )
         tried = np.isfinite(pred).all(axis=1) & (rms <= max_fit_px) & (squeeze >= MIN_VIEW_COS * aspect)
         if cell_uv is not None and len(cell_uv) and tried.any():  # not beside a cell band
@@ -222,25 +247,36 @@ def complete_grid(
         if not len(k):
             break
         meas = measure(gray, pred[k], rad[k])
+        measured[which[k]] = True
         ok = (meas.reason == "") & (np.linalg.norm(meas.uv - pred[k], axis=1) <= gate * near[k])
         if len(known) and ok.any():  # not on a reported target (nor one taken on this round)
             d, _ = cKDTree(known).query(np.nan_to_num(meas.uv))
             ok &= d >= min_separation * near[k]
         with np.errstate(invalid="ignore", divide="ignore"):
             ok &= np.abs(np.log(meas.mass / typical)) <= np.log(MASS_RATIO)
-        if not ok.any():
+        if not ok.any() or grid_ids is None:
             break
         new = which[k[ok]]
         passed[new] = True
         parts.append((new, step[k[ok]], rad[k[ok]], WindowMeasure(*(a[ok] for a in meas))))
-        # the passed dots place the next ring, as reported dots
-        index[cand.row[new], cand.col[new]] = len(at) + np.arange(len(new))
+        # the passed dots place the next ring, as reported dots; the dots beside them that are
+        # no candidate yet join
+        index[row[new], col[new]] = len(at) + np.arange(len(new))
         at, rad_of = np.r_[at, meas.uv[ok]], np.r_[rad_of, rad[k[ok]]]
         known = np.r_[known, meas.uv[ok]]
-    streak = np.where(passed, cand.streak + 1, 0)
+        placed = np.zeros(index.shape, bool)
+        placed[row[new], col[new]] = True
+        listed = np.zeros(index.shape, bool)
+        listed[row, col] = True
+        er, ec = np.nonzero((_near_count(placed) > 0) & (index < 0) & ~listed & _inner(index.shape))
+        ids, row, col = np.r_[ids, grid_ids[er, ec]], np.r_[row, er], np.r_[col, ec]
+        streak0 = np.r_[streak0, np.zeros(len(er), np.int64)]
+        passed, measured = np.r_[passed, np.zeros(len(er), bool)], np.r_[measured, np.zeros(len(er), bool)]
+    streak = np.where(passed, streak0 + 1, 0)
     sel = passed & (streak >= CONFIRM_FRAMES)
-    found = _found(cand.ids, sel, parts)
-    return Candidates(cand.ids[~sel], cand.row[~sel], cand.col[~sel], streak[~sel]), found
+    found = _found(ids, sel, parts)
+    keep = ~sel & ((np.arange(len(ids)) < len(cand.ids)) | passed)  # a new dot stays if it passed
+    return Candidates(ids[keep], row[keep], col[keep], streak[keep]), found
 
 
 def _found(ids: np.ndarray, sel: np.ndarray, parts: list) -> Found:
