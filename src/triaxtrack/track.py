@@ -78,6 +78,7 @@ from triaxtrack.detect import DetectParams
 from triaxtrack.neighbour_motion import affine_flow, reference_places, unwrap_motion
 from triaxtrack.window import WindowMeasure, measure_windows
 
+REFERENCE_WIDTH = 3.0  # x spacing: the width of the displacement field that places a dot taken on
 NEIGHBOURS = 12  # same-kind neighbours whose motion predicts a target's (local affine flow)
 MIN_FLOW_NEIGHBOURS = 4  # fewer reported neighbours: no flow check, velocity prediction
 MASS_NOISE_K = 4.0  # a mass change within 4 standard uncertainties is noise (two-sided 6e-5 a
@@ -490,8 +491,8 @@ def track_frames(
         uv, area, sigma, reason = _step(state, gray, cfg, first=i == 0)
         if cand is not None and gray is not None:
             cand, found = _complete(state, gray, cand, grid, uv, cfg)
-            if len(found.ids):  # reported in this frame; the streaks start again (conservative)
-                cand = grid_candidates(grid.ids, state.ids)
+            if len(found.ids):  # reported in this frame: the candidates around them join
+                cand = grid_candidates(grid.ids, state.ids, cand)
                 new = found.meas
                 uv, area, sigma = np.r_[uv, new.uv], np.r_[area, new.area], np.r_[sigma, new.sigma_px]
                 reason = np.r_[reason, np.full(len(found.ids), "", object)]
@@ -534,22 +535,30 @@ def _complete(
 
 def _adopt(state: _State, found: Found, reported: np.ndarray) -> None:
     """Add the dots ``found`` to ``state`` as targets reported in this frame: their neighbours
-    the nearest membrane targets ``reported`` (n,) in it, their reference place where their
-    neighbours' median displacement since the chunk's first frame puts them, their velocity
-    their neighbours' median."""
+    the nearest of the membrane targets ``reported`` (n,) in it and of the dots found with them,
+    their reference place where the reported dots' displacement field since the chunk's first
+    frame puts them (:func:`~triaxtrack.neighbour_motion.reference_places`), their velocity the
+    median of their nearest reported dots'."""
     n, m = len(state.ids), len(found.ids)
     uv = found.meas.uv
     pool = reported & (target_kind(state.ids) == MEMBRANE) & np.isfinite(state.ref_uv).all(axis=1)
     pool = np.nonzero(pool)[0]
     k = min(NEIGHBOURS, len(pool))
-    nb_new = np.full((m, NEIGHBOURS), n + m, np.int64)
-    disp, vel = np.zeros((m, 2)), np.zeros((m, 2))
+    disp, vel = np.zeros((m, 2)), np.zeros((m, 2))  # (disp: where too few reported to place them)
     if k:
         _, j = cKDTree(state.last_uv[pool]).query(uv, k=k)
         j = pool[np.asarray(j).reshape(m, k)]
-        nb_new[:, :k] = j
         disp = np.median(state.last_uv[j] - state.ref_uv[j], axis=1)
         vel = np.median(state.last_vel[j], axis=1)
+    # neighbours: the nearest reported dots and dots taken on with it (inside a patch, the
+    # nearest reported ones are all on one side, spacings away: their affine motion there is an
+    # extrapolation whose noise the flow check reads as drift)
+    every = np.r_[pool, n + np.arange(m)]
+    k = min(NEIGHBOURS, len(every) - 1)
+    nb_new = np.full((m, NEIGHBOURS), n + m, np.int64)
+    if k:
+        _, j = cKDTree(np.r_[state.last_uv[pool], uv]).query(uv, k=k + 1)
+        nb_new[:, :k] = every[np.asarray(j).reshape(m, k + 1)[:, 1:]]
     state.neighbours = np.r_[np.where(state.neighbours >= n, n + m, state.neighbours), nb_new]
     mass, smass = found.meas.mass, found.meas.sigma_mass
     grow = {  # per new target: (field, value)
@@ -561,12 +570,8 @@ def _adopt(state: _State, found: Found, reported: np.ndarray) -> None:
     for name, value in grow.items():
         old = getattr(state, name)
         setattr(state, name, np.concatenate([old, np.asarray(value, old.dtype)]))
-    # where their reported neighbours' affine motion puts them, not their median's
+    # where their reported neighbours' displacement field puts them (a smooth field: the
+    # tracker's flow check compares dots taken on together with each other from the next frame)
     state.ref_uv = reference_places(
-        state.ref_uv,
-        state.last_uv,
-        np.r_[reported, np.zeros(m, bool)],
-        state.neighbours,
-        n,
-        MIN_FLOW_NEIGHBOURS,
+        state.ref_uv, state.last_uv, np.isin(np.arange(n + m), pool), n, REFERENCE_WIDTH * found.spacing
     )
