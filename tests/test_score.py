@@ -217,6 +217,26 @@ def test_a_camera_left_out_by_the_workflow_is_reported_not_failed():
     assert "camera_missing" not in rows.index and rows.loc["camera_left_out", "passed"]
 
 
+def test_a_camera_left_out_has_no_calibration_and_is_not_failed_for_it(small_test, tmp_path):
+    """Issue 20: a camera whose video was empty was left out (quality.json `cameras_left_out`), so
+    it has no calibration either; `triaxtrack score` failed it as `camera_missing` in the
+    calibration rows (source calibration/cam03.json) while reporting it left out below."""
+    truth = json.loads((small_test / "truth" / "cameras.json").read_text())["cameras"]
+    (tmp_path / "calibration").mkdir()
+    for name in ("cam01", "cam02"):
+        cam = truth[name]
+        calibration = {"camera": name, **{k: cam[k] for k in ("width", "height", "K", "dist")}}
+        (tmp_path / "calibration" / f"{name}.json").write_text(json.dumps(calibration))
+    why = f"{small_test}/videos/cam03.mp4: the video file is empty (0 bytes)"
+    quality = {"mean_reprojection_px": 0.02, "per_camera": {}, "cameras_left_out": {"cam03": why}}
+    (tmp_path / "quality.json").write_text(json.dumps(quality))
+    df = score(tmp_path, small_test)
+    assert "camera_missing" not in set(df.metric), df[~df.passed]
+    left = df[df.metric == "camera_left_out"]
+    assert left.item.tolist() == ["cam03"] and left.passed.all() and (left.source == "quality.json").all()
+    assert df.passed.all(), df[~df.passed]
+
+
 def test_a_metric_measured_at_no_frame_has_no_worst_frame():
     """The top pedestal in no picture: its CTs' RMS is NaN at every frame. The summary keeps the
     first and last frames of it (NaN) and the worst of the other metrics, and does not fail."""

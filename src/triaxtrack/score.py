@@ -163,16 +163,19 @@ def score_cameras(
 
 
 def score_calibrations(
-    result: dict[str, Camera], truth: dict[str, Camera], tol: ScoreTolerances
-) -> pd.DataFrame:
+    result: dict[str, Camera], truth: dict[str, Camera], tol: ScoreTolerances,
+    left_out: Collection[str] = (),
+) -> pd.DataFrame:  # fmt: skip
     """Per-camera errors of calibrated intrinsics (identity poses) against the true cameras:
     ``focal_rel_error``, ``principal_point_error``, ``undistortion_map_error``
     (:func:`undistortion_map_error`, tolerance ``undistortion_px``) and, reported only,
     ``ray_direction_error`` (:func:`ray_direction_error`). A calibration whose image size is not
     the true camera's gets a failing ``image_size_mismatch`` row instead of the two map rows;
-    cameras missing from, or unknown to, the truth fail."""
-    df = score_cameras(result, truth, tol)
-    df["source"] = "calibration/" + df["item"] + ".json"
+    cameras missing from, or unknown to, the truth fail, but for those the workflow left out
+    (``left_out``: quality.json ``cameras_left_out``), reported as in :func:`score_cameras`."""
+    df = score_cameras(result, truth, tol, left_out=left_out)
+    said = df["metric"] == "camera_left_out"
+    df.loc[~said, "source"] = "calibration/" + df.loc[~said, "item"] + ".json"
     rows = []
     for name, cam in sorted(result.items()):
         if name not in truth:
@@ -486,11 +489,12 @@ def score(results_dir: str | Path, truth_dir: str | Path, tol: ScoreTolerances |
         raise ValueError(f"{results_dir}: no such results folder")
     parts = []
     truth_cameras = read_cameras(truth_dir / "cameras.json")
-    calibrations = read_calibrations(results_dir / "calibration")
-    if calibrations:
-        parts.append(score_calibrations(calibrations, truth_cameras, tol))
     quality_path = results_dir / "quality.json"
     quality = json.loads(quality_path.read_text()) if quality_path.exists() else {}
+    calibrations = read_calibrations(results_dir / "calibration")
+    if calibrations:
+        left_out = quality.get("cameras_left_out", {})
+        parts.append(score_calibrations(calibrations, truth_cameras, tol, left_out=left_out))
     if (results_dir / "cameras.json").exists():
         cameras = read_cameras(results_dir / "cameras.json")
         parts.append(score_cameras(cameras, truth_cameras, tol, left_out=quality.get("cameras_left_out", {})))
