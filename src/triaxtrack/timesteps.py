@@ -168,18 +168,20 @@ def handover_check(tracked: pd.DataFrame, labels: pd.DataFrame, tol_px: float = 
     }
 
 
-LARGE_LOSS_SHARE = 0.5  # a camera-frame reporting less than this share of the camera's median
+LARGE_LOSS_SHARE = 0.5  # a camera-frame reporting less than this share of the camera's best
 # frame has lost targets wholesale (flicker, an occluder, a moved or failing camera), not one by one
 
 
 def large_losses(tracks: pd.DataFrame) -> pd.DataFrame:
     """The camera-frames of ``tracks`` (``TRACKS``; a row repeated, a frame two chunks share, is
     counted once) that report less than ``LARGE_LOSS_SHARE`` of the targets the camera reports
-    at its median frame: columns camera, frame, reported, share (of that median)."""
+    at its best frame: columns camera, frame, reported, share (of that best frame). The best
+    frame, not the median one: a camera whose video is damaged from some frame on loses most of
+    its targets at more than half of its frames, and its median frame is then one of those."""
     t = tracks.drop_duplicates(["camera", "frame", "id"], keep="last")
     reported = (t["reason"] == "").groupby([t["camera"], t["frame"]]).sum().rename("reported").reset_index()
-    median = reported.groupby("camera")["reported"].transform("median")
-    reported["share"] = reported["reported"] / median.where(median > 0)
+    best = reported.groupby("camera")["reported"].transform("max")
+    reported["share"] = reported["reported"] / best.where(best > 0)
     return reported[reported["share"] < LARGE_LOSS_SHARE].reset_index(drop=True)
 
 
@@ -263,7 +265,7 @@ def _tracking_quality(points: pd.DataFrame, tracks: pd.DataFrame, membrane_ids: 
                 "camera": str(r.camera),
                 "frame": int(r.frame),
                 "reported": int(r.reported),
-                "share_of_median": round(float(r.share), 3),
+                "share_of_best": round(float(r.share), 3),
             }
             for r in large_losses(tracks).itertuples(index=False)
         ],

@@ -328,7 +328,7 @@ def tracking_figure(tracks: pd.DataFrame, layout: MembraneLayout, width_px: int 
         cams,
         stacks or [("", np.zeros(len(cams)), PALETTE[0])],
         title="target-frames not reported per camera over the test, by reason "
-        f"(under each camera: frames with large losses, below {LARGE_LOSS_SHARE:.0%} of its median frame)",
+        f"(under each camera: frames with large losses, below {LARGE_LOSS_SHARE:.0%} of its best frame)",
         ylabel="target-frames",
         annotate=[f"{v:.0f}" for v in lost],
         sublabels=[f"{flagged.get(c, 0)} flagged" for c in cams],
