@@ -183,3 +183,43 @@ def test_a_video_without_frames_or_keyframes(tmp_path):
     expected = f"{broken}: none of its {N - N // GOP} frames is a keyframe: none decodes; copy it again"
     with pytest.raises(ValueError, match=re.escape(expected)):
         probe_video(broken)
+
+
+# ---------------------------------------------------------------- cameras left out at parse time
+
+
+def test_a_missing_empty_or_broken_video_leaves_its_camera_out_by_name(tmp_path):
+    """Issue 20's table on 13 cameras: one camera's video missing, empty, or with its first bytes
+    zeroed (broken: FFmpeg cannot open it) is left out with why, naming the file, and the test
+    goes on with 12; a video cut behind a whole index passes this quick check (its probe_video
+    job stops the test); with ``on_bad_camera: fail`` the test stops listing every camera."""
+    from triaxtrack.inventory import usable_cameras
+
+    whole = write_video(tmp_path / "whole.mp4")
+    videos = {f"cam{k:02d}": tmp_path / f"cam{k:02d}.mp4" for k in range(1, 14)}
+    for path in videos.values():
+        path.write_bytes(whole.read_bytes())
+    data = bytearray(whole.read_bytes())
+    data[:64] = bytes(64)
+    damaged = {"missing": None, "empty": b"", "broken": bytes(data)}
+    why = {"missing": "video file not found: {}", "empty": "{}: the video file is empty (0 bytes)",
+           "broken": "cannot read video {}: "}  # fmt: skip
+    for camera, fault in zip(("cam04", "cam05", "cam06"), damaged, strict=True):
+        path = videos[camera]
+        path.unlink()
+        if damaged[fault] is not None:
+            path.write_bytes(damaged[fault])
+        kept, left_out = usable_cameras(videos, "skip", 8, "test 'x'")
+        assert kept == [c for c in videos if c != camera] and list(left_out) == [camera], fault
+        assert why[fault].format(path) in left_out[camera], left_out
+        path.write_bytes(whole.read_bytes())
+    cut(write_video(tmp_path / "fast.mp4", faststart=True), videos["cam08"], 0.6)
+    assert usable_cameras(videos) == (list(videos), {})  # its index is whole ...
+    with pytest.raises(ValueError, match=re.escape(f"{videos['cam08']}: truncated video")):
+        probe_video(videos["cam08"])  # ... its probe_video job counts the packets
+    cut(whole, videos["cam07"], 0.6)  # index last: no index, so it is left out as truncated
+    _, left_out = usable_cameras(videos)
+    assert list(left_out) == ["cam07"] and "truncated video" in left_out["cam07"]
+    with pytest.raises(ValueError, match="on_bad_camera: fail") as err:
+        usable_cameras(videos, "fail")
+    assert f"cam07: {videos['cam07']}: truncated video" in str(err.value)
