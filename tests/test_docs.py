@@ -20,8 +20,10 @@ GUIDES = ("measure-your-own-test.md", "test-folder.md", "target-kit.md")
 
 
 def heading_anchors(markdown: str) -> set[str]:
-    """GitHub's anchors of the headings: lower case, punctuation dropped, spaces to hyphens."""
-    headings = re.findall(r"^#+\s+(.*?)\s*$", markdown, flags=re.MULTILINE)
+    """GitHub's anchors of the headings (not the comments of code blocks): lower case,
+    punctuation dropped, spaces to hyphens."""
+    prose = re.sub(r"^```.*?^```", "", markdown, flags=re.MULTILINE | re.DOTALL)
+    headings = re.findall(r"^#+\s+(.*?)\s*$", prose, flags=re.MULTILINE)
     return {re.sub(r"[^\w\- ]", "", h.lower()).replace(" ", "-") for h in headings}
 
 
