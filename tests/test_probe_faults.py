@@ -223,3 +223,17 @@ def test_a_missing_empty_or_broken_video_leaves_its_camera_out_by_name(tmp_path)
     with pytest.raises(ValueError, match="on_bad_camera: fail") as err:
         usable_cameras(videos, "fail")
     assert f"cam07: {videos['cam07']}: truncated video" in str(err.value)
+
+
+def test_a_video_at_another_frame_rate_is_left_out_before_any_job(tmp_path):
+    """A camera recorded at 25 fps in a 15 fps test is named at parse time (its index: no job
+    runs first; the inventory job stopped the test after 85 jobs had run) and left out."""
+    from triaxtrack.inventory import usable_cameras
+
+    videos = {f"cam{i:02d}": write_video(tmp_path / f"cam{i:02d}.mp4") for i in range(1, 10)}
+    write_video(videos["cam08"], fps=25)
+    kept, left_out = usable_cameras(videos, "skip", 8, "test 'x'", fps=FPS)
+    assert list(left_out) == ["cam08"] and "cam08" not in kept and len(kept) == 8
+    assert left_out["cam08"] == f"{videos['cam08']}: frame rate 25 frames/s, but test.yaml gives fps: {FPS}"
+    with pytest.raises(ValueError, match="only 1 of 9 cameras can be measured"):
+        usable_cameras(videos, "skip", 8, "test 'x'", fps=25.0)  # the test says 25: the others differ

@@ -80,29 +80,34 @@ def summarize_probes(test: dict, probes: list[dict], name: str, *, strict: bool 
     }
 
 
-def video_problem(path: str | Path) -> str | None:
+def video_problem(path: str | Path, fps: float | None = None) -> str | None:
     """Why the video at ``path`` cannot be measured, in words naming the file (missing, empty,
-    truncated, no frames, not a video: :func:`triaxtrack.video.probe_video` on its index, so a
-    few milliseconds at parse time), or None if it can be read."""
+    truncated, no frames, not a video, or a frame rate other than test.yaml's ``fps``, as the
+    inventory words it: :func:`triaxtrack.video.probe_video` on its index, so a few
+    milliseconds at parse time, before any job runs), or None if it can be read."""
     from triaxtrack.video import probe_video
 
     try:
-        probe_video(path, index_only=True)
+        info = probe_video(path, index_only=True)
     except (OSError, ValueError) as exc:
         return str(exc)
+    if fps is not None and abs(info["fps"] - fps) > FPS_REL_TOL * fps:
+        return f"{path}: frame rate {info['fps']:.6g} frames/s, but test.yaml gives fps: {fps:g}"
     return None
 
 
 def usable_cameras(
-    videos: dict[str, str | Path], on_bad_camera: str = "skip", min_cameras: int = 8, source: str = "test"
-) -> tuple[list[str], dict[str, str]]:
+    videos: dict[str, str | Path], on_bad_camera: str = "skip", min_cameras: int = 8, source: str = "test",
+    fps: float | None = None,
+) -> tuple[list[str], dict[str, str]]:  # fmt: skip
     """``(cameras kept, {camera left out: why})`` of a recorded test from its cameras' videos
-    (``{camera: path}``, in test.yaml's order): a camera whose video cannot be read
-    (:func:`video_problem`) is left out with ``on_bad_camera="skip"``; with ``"fail"``, or when
+    (``{camera: path}``, in test.yaml's order): a camera whose video cannot be read, or whose
+    frame rate is not test.yaml's ``fps`` (:func:`video_problem`) is left out with
+    ``on_bad_camera="skip"``; with ``"fail"``, or when
     cameras are left out and fewer than ``min_cameras`` are kept (a test recorded with fewer,
     all readable, is measured with them), or fewer than two are kept, ValueError naming
     ``source`` and every camera left out and why."""
-    problems = {camera: p for camera, path in videos.items() if (p := video_problem(path)) is not None}
+    problems = {camera: p for camera, path in videos.items() if (p := video_problem(path, fps)) is not None}
     kept = [camera for camera in videos if camera not in problems]
     listed = "".join(f"\n  {camera}: {why}" for camera, why in problems.items())
     if problems and on_bad_camera == "fail":

@@ -232,7 +232,8 @@ def get_cameras(test):
 
 def get_cameras_left_out(wildcards):
     """{camera: why} of the cameras of a recorded test whose video cannot be read (missing,
-    empty, unreadable), left out with `on_bad_camera: skip`; {} for simulated tests."""
+    empty, unreadable, another frame rate), left out with `on_bad_camera: skip`; {} for
+    simulated tests."""
     if "simulate" in _spec(wildcards.test):
         return {}
     return _recorded_cameras(wildcards.test)[1]
@@ -240,8 +241,8 @@ def get_cameras_left_out(wildcards):
 
 @cache
 def _recorded_cameras(test):
-    """(cameras kept, {left out: why}) of a recorded test, its videos checked at parse time
-    (triaxtrack.inventory.usable_cameras); a WorkflowError with `on_bad_camera: fail` or fewer
+    """(cameras kept, {left out: why}) of a recorded test, its videos (and their frame rates
+    against test.yaml's) checked at parse time (triaxtrack.inventory.usable_cameras); a WorkflowError with `on_bad_camera: fail` or fewer
     than `min_cameras` kept."""
     from triaxtrack.inventory import usable_cameras
 
@@ -249,7 +250,11 @@ def _recorded_cameras(test):
     videos = {name: _recorded_video(test, name) for name in names}
     try:
         kept, left_out = usable_cameras(
-            videos, config["on_bad_camera"], config["min_cameras"], f"test {test!r}"
+            videos,
+            config["on_bad_camera"],
+            config["min_cameras"],
+            f"test {test!r}",
+            _spec(test)["recorded"].get("fps"),
         )
     except ValueError as exc:
         raise WorkflowError(str(exc)) from None
