@@ -16,9 +16,10 @@ biased and the columns crowd). The dot's window is measured there
 lost or at the edge), within the gate of the prediction (``gate`` x the distance of its nearest
 neighbour), no reported target sits within ``min_separation`` of that distance of it, and its
 normalised mass is within ``MASS_RATIO`` of the median reported dot's; a dot beyond two
-reported columns must not be its row's last (:func:`_row_goes_on`: at a silhouette, seen
-through the cell's lens, the column steps do not show how obliquely the last dot is seen, and
-its blob takes in the dark edge's fringe). The dots that pass then count as reported for the
+reported columns must be seen within 60 degrees of face on by its own column step (from the dot
+beside it) and must not be its row's last (:func:`_row_goes_on`: at a silhouette, seen through
+the cell's lens, the column steps do not show how obliquely the last dot is seen, and its blob
+takes in the dark edge's fringe). The dots that pass then count as reported for the
 next ring within the same frame, so a patch hidden at the labelled frame (an occluder) grows
 inward from its edges in one frame. A dot that passes in ``CONFIRM_FRAMES`` measured frames in
 a row is taken on (streaks carry over the frames in which others are), its spacing (for the
@@ -274,7 +275,7 @@ def complete_grid(
     that passes places the next, as a reported dot would. So a patch hidden at the labelled
     frame (an occluder) is taken on within ``CONFIRM_FRAMES`` frames of being seen again, where
     it took a ring every ``CONFIRM_FRAMES`` frames from its edges (and a patch wider than the
-    neighbours reach, only from its corners: 36 % of one of 229 dots on a 13-camera test). A
+    neighbours reach, only from its corners: 36 % of a box of 223 dots on a 13-camera test). A
     taken-on dot's spacing is the grid's fitted step (its nearest neighbour when placed may have
     been two rows away: the tracker then took its neighbours for the same dot, "ambiguous")."""
     typical = np.nanmedian(mass) if np.isfinite(mass).any() else np.nan
