@@ -94,6 +94,7 @@ VELOCITY_SMOOTHING = 0.5  # weight of the previous velocity (one noisy or biased
 # where the motion a frame shows moves some prediction by more than this share of its gate, the
 # frame's targets are measured again from the moved predictions (else the move is only noise)
 REPREDICT_SHARE = 0.25
+MIN_WALL_TARGETS = 8  # cell-wall targets found that show a camera's own move
 REASONS = (
     "edge", "lost", "merged", "shape", "jump", "ambiguous", "drift", "unconfirmed", "disagrees",
     "not_recorded",
@@ -250,6 +251,25 @@ def _frame_motion(state: _State, pred: np.ndarray, meas: WindowMeasure, gate: fl
     motion, known = unwrap_motion(miss, found, pred, state.neighbours, tol, MIN_FLOW_NEIGHBOURS)
     seed = found & (np.linalg.norm(miss, axis=1) <= tol)
     return np.where((known & ~seed)[:, None], motion, 0.0)
+
+
+def _camera_motion(state: _State, pred: np.ndarray, meas: WindowMeasure, gate: float) -> np.ndarray:
+    """(2,) the camera's own move this frame: the median departure from their predictions of the
+    cell-wall targets found clean within their gate (the cell does not move; at least
+    ``MIN_WALL_TARGETS``, agreeing within a quarter of their gate), else zero. A camera knocked
+    by about one membrane dot spacing shows the membrane the same one dot over everywhere, which
+    its own motion cannot tell from no motion (a 720p camera moved (3, 2) px, its dots 4.5 px
+    apart: 185 observations locked one dot over); the cell-wall targets, further apart, are
+    found moved."""
+    wall = (target_kind(state.ids) == CELL_WALL) & (meas.reason == "") & np.isfinite(state.ref_mass)
+    move = meas.uv[wall] - pred[wall]
+    near = np.linalg.norm(move, axis=1) <= gate * state.spacing[wall]
+    move = move[near]
+    if len(move) < MIN_WALL_TARGETS:
+        return np.zeros(2)
+    shift = np.median(move, axis=0)
+    spread = np.median(np.linalg.norm(move - shift, axis=1))
+    return shift if spread <= 0.25 * gate * np.median(state.spacing[wall][near]) else np.zeros(2)
 
 
 def _corrected_prediction(
@@ -446,7 +466,11 @@ def _step(state: _State, gray: np.ndarray | None, cfg: TrackingConfig, first: bo
     # targets left out of the chunk at its first frame are not measured again (NaN: 'lost')
     probe = pred if first else np.where(np.isfinite(state.ref_mass)[:, None], pred, np.nan)
     meas = measure_targets(gray, probe, state.radius, cfg)
-    if not first:  # the prediction moved by the motion the frame shows
+    if not first:  # the camera's own motion (a knock), then the motion the frame shows
+        shift = _camera_motion(state, pred, meas, cfg.gate)
+        if np.hypot(*shift) > REPREDICT_SHARE * cfg.gate * np.median(state.spacing):
+            pred = pred + shift
+            meas = measure_targets(gray, probe + shift, state.radius, cfg)
         pred, meas = _corrected_prediction(state, gray, cfg, pred, meas)
     reason = meas.reason.copy()
     if first:  # the tracker's centroid must agree with the detection's, or the target is left out
