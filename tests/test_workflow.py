@@ -207,6 +207,18 @@ def test_a_camera_whose_video_cannot_be_read_is_left_out(tmp_path):
     assert [c["camera"] for c in inventory["cameras"]] == ["camA", "camD"]
 
 
+def test_a_recorded_tests_heavy_jobs_wait_for_its_videos_to_be_checked(tmp_path):
+    """A camera's calibration and frame map wait for the test's inventory (every video probed
+    packet by packet, sizes and frame rates compared), so a cut or mismatched video stops the
+    test, naming the file, before any heavy job runs (a cut faststart video had stopped it after
+    30 of 118 steps)."""
+    spec = {"name": "wf-early", "fps": 15, "frames": 30, "cameras": ["camA", "camB", "camC"]}
+    folder = recorded_folder(tmp_path / "rec", spec)
+    for target in ("results/wf-early/calibration/camA.json", "results/wf-early/frames/camA.parquet"):
+        counts = dry_run("--config", f"test={folder}", "--", target)
+        assert counts["inventory"] == 1 and counts["probe_video"] == 3, (target, counts)
+
+
 def test_an_archive_of_test_folders_is_processed_folder_by_folder(tmp_path):
     for name, cameras in (("tx-001", ["a", "b"]), ("tx-002", ["a", "b", "c"])):
         spec = {"name": name, "fps": 15, "frames": 30, "cameras": cameras}

@@ -6,6 +6,7 @@ rule calibrate_camera:
     input:
         images=get_calibration_images,
         kit=get_test_kit,
+        videos_checked=get_videos_checked,
     output:
         calibration="results/{test}/calibration/{camera}.json",
     log:

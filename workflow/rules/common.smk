@@ -404,6 +404,16 @@ def get_recorded_spec(wildcards):
     return {**spec["recorded"], "cameras": cameras}
 
 
+def get_videos_checked(wildcards):
+    """A recorded test's inventory (every video probed packet by packet, sizes and frame rates
+    compared): the calibration and the frame maps wait for it, so that a cut or mismatched
+    video stops the test, naming the file, before any heavy job runs; none for a simulated
+    test."""
+    if "recorded" in _spec(wildcards.test):
+        return f"results/{wildcards.test}/inventory.json"
+    return []
+
+
 def get_inventory_probes(wildcards):
     """The probe of every camera's video of a recorded test, in test.yaml's camera order."""
     return expand(

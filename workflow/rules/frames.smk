@@ -7,6 +7,7 @@ rule frame_map:
         video=get_camera_video,
         test_yaml=get_test_yaml,
         frame_count_video=get_frame_count_video,
+        videos_checked=get_videos_checked,
     output:
         frames="results/{test}/frames/{camera}.parquet",
     log:
