@@ -104,7 +104,8 @@ def test_profile_runs_a_tiny_test_on_slurm(tmp_path):
     for target in targets:
         assert (work / target).is_file(), target
     counts = job_counts(out)
-    assert counts["identify_targets"] == counts["track_targets"] == counts["render_video_chunk"] == 6
+    assert counts["identify_targets"] == counts["track_targets"] == 6
+    assert counts["render_video_chunk"] == 3  # one segment a camera: the GOP grid (2 s) > 4 frames
     for group in ("render", "identify", "track"):
         assert f"Group job {group} " in out, group
     submitted = len(re.findall(r"has been submitted with SLURM jobid \d+", out))
