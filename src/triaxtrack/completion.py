@@ -212,28 +212,23 @@ def _row_goes_on(
     gray: np.ndarray, measure, meas: WindowMeasure, beside: np.ndarray, radius: np.ndarray,
     typical: float, gate: float, cell_uv: np.ndarray | None,
 ) -> np.ndarray:  # fmt: skip
-    """Per measured dot (``meas``, k rows), whether its row goes on a column step beyond it,
-    away from the reported dot ``beside`` it in its row ((k, 2); NaN: between reported columns,
-    no check): a clean dot not smaller than ``typical`` / ``MASS_RATIO`` lies within ``gate`` of
+    """Per measured dot (``meas``, k rows, placed beyond two reported columns), whether its row
+    goes on a column step beyond it, away from the reported dot ``beside`` it in its row
+    ((k, 2)): a clean dot not smaller than ``typical`` / ``MASS_RATIO`` lies within ``gate`` of
     a step there, or a reported cell-wall target (``cell_uv`` (c, 2)) within a step (a band in
     front). At a silhouette the next column's dot, if any, is a sliver merged with the dark
     beyond; identification does not label a row's last dot beside a dark edge either."""
-    ok = np.ones(len(beside), bool)
-    check = np.nonzero(np.isfinite(beside).all(axis=1) & np.isfinite(meas.uv).all(axis=1))[0]
-    if not len(check):
-        return ok
-    step = np.linalg.norm(meas.uv[check] - beside[check], axis=1)
-    probe = 2 * meas.uv[check] - beside[check]
-    far = measure(gray, probe, radius[check])
+    step = np.linalg.norm(meas.uv - beside, axis=1)
+    probe = 2 * meas.uv - beside
+    far = measure(gray, probe, radius)
     with np.errstate(invalid="ignore", divide="ignore"):
-        dot = (
+        ok = (
             (far.reason == "")
             & (np.linalg.norm(far.uv - probe, axis=1) <= gate * step)
             & (far.mass >= typical / MASS_RATIO)
         )
     if cell_uv is not None and len(cell_uv):
-        dot |= cKDTree(cell_uv).query(probe)[0] <= step
-    ok[check] = dot
+        ok |= cKDTree(cell_uv).query(probe)[0] <= step
     return ok
 
 

@@ -41,11 +41,9 @@ def summarize_probes(test: dict, probes: list[dict], name: str, *, strict: bool 
         video = probe.get("path", f"the video of camera {camera['name']}")
         if probe["frames"] != expected_frames:
             flags.append("frame_count_differs")
-        if abs(probe["fps"] - test["fps"]) > FPS_REL_TOL * test["fps"]:
+        if (rate := fps_problem(video, probe["fps"], test["fps"])) is not None:
             flags.append("fps_differs")
-            problems.append(
-                f"{video}: frame rate {probe['fps']:.6g} frames/s, but test.yaml gives fps: {test['fps']:g}"
-            )
+            problems.append(rate)
         if (probe["width"], probe["height"]) != expected_size:
             flags.append("size_differs")
             problems.append(
@@ -82,8 +80,8 @@ def summarize_probes(test: dict, probes: list[dict], name: str, *, strict: bool 
 
 def video_problem(path: str | Path, fps: float | None = None) -> str | None:
     """Why the video at ``path`` cannot be measured, in words naming the file (missing, empty,
-    truncated, no frames, not a video, or a frame rate other than test.yaml's ``fps``, as the
-    inventory words it: :func:`triaxtrack.video.probe_video` on its index, so a few
+    truncated, no frames, not a video, or a frame rate other than test.yaml's ``fps``
+    (:func:`fps_problem`): :func:`triaxtrack.video.probe_video` on its index, so a few
     milliseconds at parse time, before any job runs), or None if it can be read."""
     from triaxtrack.video import probe_video
 
@@ -91,9 +89,15 @@ def video_problem(path: str | Path, fps: float | None = None) -> str | None:
         info = probe_video(path, index_only=True)
     except (OSError, ValueError) as exc:
         return str(exc)
-    if fps is not None and abs(info["fps"] - fps) > FPS_REL_TOL * fps:
-        return f"{path}: frame rate {info['fps']:.6g} frames/s, but test.yaml gives fps: {fps:g}"
-    return None
+    return None if fps is None else fps_problem(path, info["fps"], fps)
+
+
+def fps_problem(video: str | Path, fps: float, expected: float) -> str | None:
+    """The message naming ``video`` whose frame rate ``fps`` is not test.yaml's ``expected``
+    (within ``FPS_REL_TOL``), or None."""
+    if abs(fps - expected) <= FPS_REL_TOL * expected:
+        return None
+    return f"{video}: frame rate {fps:.6g} frames/s, but test.yaml gives fps: {expected:g}"
 
 
 def usable_cameras(

@@ -242,7 +242,8 @@ def get_cameras_left_out(wildcards):
 @cache
 def _recorded_cameras(test):
     """(cameras kept, {left out: why}) of a recorded test, its videos (and their frame rates
-    against test.yaml's) checked at parse time (triaxtrack.inventory.usable_cameras); a WorkflowError with `on_bad_camera: fail` or fewer
+    against test.yaml's) checked at parse time (triaxtrack.inventory.usable_cameras); a
+    WorkflowError with `on_bad_camera: fail` or fewer
     than `min_cameras` kept."""
     from triaxtrack.inventory import usable_cameras
 
