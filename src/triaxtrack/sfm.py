@@ -40,6 +40,7 @@ import numpy as np
 import pandas as pd
 from scipy.optimize import least_squares
 
+from triaxtrack.eccentricity import observation_eccentricity
 from triaxtrack.optics import Camera, CellOptics, project_air
 from triaxtrack.refractive_pose import PoseObservations, pnp_pose, pose_camera
 
@@ -68,7 +69,9 @@ class SfmConfig:
     in the water, and one with fewer targets of any kind is left out, with the reason;
     ``pose_from_water``: pose such cameras through the wall (False: leave them out);
     ``refine_intrinsics``: let the bundle adjustment refine focal lengths, principal
-    point and distortion (by default they stay as calibrated).
+    point and distortion (by default they stay as calibrated); ``eccentricity``: correct the
+    cell-wall observations for the eccentricity of the marks' images
+    (:mod:`triaxtrack.eccentricity`).
     """
 
     ransac_px: float = 2.0
@@ -76,6 +79,7 @@ class SfmConfig:
     min_targets: int = 12
     refine_intrinsics: bool = False
     pose_from_water: bool = True
+    eccentricity: bool = True
 
     @staticmethod
     def from_dict(d: dict | None) -> SfmConfig:
@@ -310,12 +314,19 @@ def axis_frame(
 
 
 def _air_reconstruction(
-    posed: dict[str, Camera], obs: pd.DataFrame, design: pd.DataFrame, cfg: SfmConfig
+    posed: dict[str, Camera],
+    obs: pd.DataFrame,
+    design: pd.DataFrame,
+    cfg: SfmConfig,
+    mark_radius_mm: pd.Series | None = None,
 ) -> CellReconstruction | None:
     """Steps 2-4 of the module docstring for the cameras ``posed`` in air (two or more), from
     their PnP observations ``obs`` (with ``inlier``); None when fewer than ``cfg.min_targets``
     cell-wall targets are seen by two of them (cameras close to the cell, each seeing a strip of
-    its bands, far apart): no bundle to adjust."""
+    its bands, far apart): no bundle to adjust. With ``mark_radius_mm`` (printed radius by ID)
+    and ``cfg.eccentricity``, the observations are corrected for the eccentricity of the marks'
+    images at the adjusted points and the bundle adjusted once more (the residuals are then of
+    the corrected observations; ``u_px, v_px`` stay as observed)."""
     used = obs["inlier"].to_numpy().copy()
     reason = np.where(used, "", "PnP outlier").astype(object)
     for rounds in range(1, MAX_BA_ROUNDS + 1):
@@ -342,6 +353,14 @@ def _air_reconstruction(
             break  # (after the last round the few left above the limit stay in)
         reason[bad] = f"residual above {cfg.max_residual_px} px"
         used &= ~bad
+    observed = obs
+    if mark_radius_mm is not None and cfg.eccentricity:
+        xyz = adj_pts.set_index("id").reindex(obs["id"])[["x_mm", "y_mm", "z_mm"]].to_numpy()
+        cam_of = obs["camera"].to_numpy().astype(str)
+        radius = mark_radius_mm.reindex(obs["id"]).to_numpy()
+        ecc = observation_eccentricity(adj_cams, cam_of, xyz, radius, None)
+        obs = obs.assign(u_px=obs["u_px"] - ecc[:, 0], v_px=obs["v_px"] - ecc[:, 1])
+        adj_cams, adj_pts = bundle_adjust(posed, obs[used], adj_pts, cfg.refine_intrinsics)
     s, A, b = similarity_transform(
         adj_pts[["x_mm", "y_mm", "z_mm"]].to_numpy(),
         design.set_index("id").loc[adj_pts["id"], ["x_mm", "y_mm", "z_mm"]].to_numpy(),
@@ -352,7 +371,9 @@ def _air_reconstruction(
     A2, b2 = axis_frame(cyl)
     pts = transform_points(pts, 1.0, A2, b2)
     cams = {n: c.transformed(s, A, b).transformed(1.0, A2, b2) for n, c in adj_cams.items()}
-    res = reprojection_residuals(cams, obs, pts).assign(used=used, reason=reason)
+    res = reprojection_residuals(cams, obs, pts).assign(
+        u_px=observed["u_px"].to_numpy(), v_px=observed["v_px"].to_numpy(), used=used, reason=reason
+    )
     err = np.hypot(res["du_px"], res["dv_px"]).to_numpy()
     stats = pd.DataFrame({"id": res["id"], "e2": err**2, "used": used, "camera": res["camera"]})[used]
     per = stats.groupby("id").agg(n_rays=("e2", "size"), ms=("e2", "mean"))
@@ -401,12 +422,19 @@ def _label_counts(labels: pd.DataFrame, kinds: pd.Series) -> dict[str, str]:
 
 
 def _pose_through_wall(
-    intrinsics: Camera, labels: pd.DataFrame, known: pd.DataFrame, cell: CellOptics, cfg: SfmConfig
+    intrinsics: Camera,
+    labels: pd.DataFrame,
+    known: pd.DataFrame,
+    cell: CellOptics,
+    cfg: SfmConfig,
+    mark_radius_mm: pd.Series | None = None,
 ) -> tuple[Camera, dict, pd.DataFrame] | str:
     """One camera posed from its labels at ``REFERENCE_FRAME`` of the targets ``known`` (``id,
     x_mm, y_mm, z_mm, in_water``) through ``cell`` (:func:`triaxtrack.refractive_pose.pose_camera`).
-    Returns the camera, its ``posed_from`` entry and the residual rows of its cell-wall
-    observations, or why it could not be posed."""
+    With ``mark_radius_mm`` and ``cfg.eccentricity`` it is posed again from the observations
+    corrected for the eccentricity of the marks' images at the first pose. Returns the camera,
+    its ``posed_from`` entry and the residual rows of its cell-wall observations, or why it
+    could not be posed."""
     lab = labels[(labels["camera"] == intrinsics.name) & (labels["frame"] == REFERENCE_FRAME)]
     lab = lab.merge(known, on="id").drop_duplicates("id").reset_index(drop=True)
     if len(lab) < cfg.min_targets:
@@ -418,6 +446,15 @@ def _pose_through_wall(
     pose = pose_camera(intrinsics, obs, cell, cfg.min_targets, cfg.ransac_px)
     if isinstance(pose, str):
         return pose
+    if mark_radius_mm is not None and cfg.eccentricity:
+        radius = mark_radius_mm.reindex(obs.ids).to_numpy()
+        ecc = np.zeros_like(obs.uv)
+        for in_water, medium in ((True, cell), (False, None)):
+            sel = water == in_water
+            ecc[sel] = observation_eccentricity({intrinsics.name: pose.camera}, lab["camera"].to_numpy()[sel],
+                                                obs.xyz[sel], radius[sel], medium)  # fmt: skip
+        again = pose_camera(intrinsics, replace(obs, uv=obs.uv - ecc), cell, cfg.min_targets, cfg.ransac_px)
+        pose = pose if isinstance(again, str) else again
     info = {
         "pose_from": "water" if water[pose.used].any() else "cell_wall",
         "targets": int(pose.used.sum()),
@@ -439,6 +476,7 @@ def reconstruct_cell(
     cfg: SfmConfig,
     water: pd.DataFrame | None = None,
     cell: CellOptics | None = None,
+    mark_radius_mm: pd.Series | None = None,
 ) -> CellReconstruction:
     """Cameras and cell wall from the labelled targets (module docstring).
 
@@ -448,7 +486,9 @@ def reconstruct_cell(
     z_mm`` of the cell-wall targets (design positions); ``water``: the same of the targets in the
     water whose design position holds at ``REFERENCE_FRAME`` (pedestal CTs, membrane dots; an
     optional ``kind`` column names them in messages); ``cell``: the kit's cell (radii,
-    indices). Without ``water`` and ``cell`` only cameras that see the wall are posed. Raises
+    indices); ``mark_radius_mm``: the printed radius of each cell-wall ID's round mark, for the
+    eccentricity of its image (:func:`triaxtrack.eccentricity.mark_radii`; None: no
+    correction). Without ``water`` and ``cell`` only cameras that see the wall are posed. Raises
     ValueError, naming every camera and what it labelled, when fewer than two can be posed.
     """
     obs = earliest_observations(labels, design["id"].to_numpy(), cfg.min_targets)
@@ -456,7 +496,7 @@ def reconstruct_cell(
     through_water = water is not None and cell is not None and cfg.pose_from_water
     for name in sorted(set(cameras) - set(posed) - set(dropped)):
         dropped[name] = "no frame with enough labelled cell-wall targets"
-    rec = _air_reconstruction(posed, obs, design, cfg) if len(posed) >= 2 else None
+    rec = _air_reconstruction(posed, obs, design, cfg, mark_radius_mm) if len(posed) >= 2 else None
     for name in sorted(set(posed) - set(rec.cameras if rec is not None else posed)):
         dropped[name] = f"fewer than {cfg.min_targets} cell-wall targets left by the bundle adjustment"
     unlike = rec is not None and not is_printed_cell(rec)
@@ -473,7 +513,7 @@ def reconstruct_cell(
         rec = _nominal_reconstruction(cell, labels)
         dropped = {n: dropped.get(n, f"{why}: posed through it") for n in cameras}
     if rec is not None and through_water and dropped:
-        rec = _add_water_cameras(rec, cameras, labels, design, water, cell, cfg, dropped)
+        rec = _add_water_cameras(rec, cameras, labels, design, water, cell, cfg, dropped, mark_radius_mm)
         dropped = rec.dropped
     if rec is None or len(rec.cameras) < 2:
         kinds = pd.Series("cell-wall", index=design["id"].to_numpy())
@@ -500,6 +540,7 @@ def _add_water_cameras(
     cell: CellOptics,
     cfg: SfmConfig,
     dropped: dict[str, str],
+    mark_radius_mm: pd.Series | None = None,
 ) -> CellReconstruction:
     """``rec`` with the cameras of ``dropped`` posed through the wall where they can be: against
     the fitted cell (its radius, the kit's wall thickness and indices) in the axis frame, or the
@@ -514,7 +555,7 @@ def _add_water_cameras(
     optics = replace(cell, outer_radius=rec.cylinder.radius, inner_radius=rec.cylinder.radius - thickness)
     cams, posed_from, left, rows = dict(rec.cameras), dict(rec.posed_from), {}, [rec.residuals]
     for name in sorted(dropped):
-        out = _pose_through_wall(cameras[name], labels, known, optics, cfg)
+        out = _pose_through_wall(cameras[name], labels, known, optics, cfg, mark_radius_mm)
         if isinstance(out, str):
             left[name] = f"{dropped[name]}; through the wall: {out}"
             continue

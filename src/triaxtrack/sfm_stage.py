@@ -8,6 +8,7 @@ import json
 from pathlib import Path
 
 from triaxtrack.calibrate.files import calibrated_camera, read_calibration
+from triaxtrack.eccentricity import mark_radii
 from triaxtrack.jsonfile import write_json
 from triaxtrack.kit import design_points, load_kit_design, target_table
 from triaxtrack.optics import configured_cell
@@ -47,7 +48,10 @@ def run_reconstruct_cell(
     cfg = SfmConfig.from_dict(reconstruction_cfg)
     optics = configured_cell(design, cell_cfg)
     labelled = read_table(labels, LABELS)
-    rec = reconstruct_cell(cameras, labelled, design_pts[wall], cfg, water=water, cell=optics)
+    radii = mark_radii(table, design["coded_target"]["centre_radius"])
+    rec = reconstruct_cell(
+        cameras, labelled, design_pts[wall], cfg, water=water, cell=optics, mark_radius_mm=radii
+    )
     summary = cell_summary(rec)
     write_json(cell, summary)
     write_table(rec.points.assign(frame=0, time_s=0.0), points, POINTS)

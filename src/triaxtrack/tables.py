@@ -162,7 +162,9 @@ RESIDUALS = Schema(
 """Every observation offered to a reconstruction (``triaxtrack.sfm``: cell-wall targets in air;
 ``triaxtrack.triangulate``: targets in the water): ``u_px, v_px`` the labelled distorted pixel,
 ``du_px, dv_px`` the reprojection of the reconstructed point minus it (NaN where there is no
-point), ``used`` whether it entered the solution, ``reason`` why not ('' when used)."""
+point; with ``reconstruction.eccentricity``, the reprojection plus the eccentricity of the
+mark's image, :mod:`triaxtrack.eccentricity`), ``used`` whether it entered the solution,
+``reason`` why not ('' when used)."""
 
 
 TRACKS = Schema(

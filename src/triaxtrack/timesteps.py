@@ -29,6 +29,7 @@ import numpy as np
 import pandas as pd
 
 from triaxtrack.codec_lag import corrected_tracks, read_lag_files
+from triaxtrack.eccentricity import mark_radii
 from triaxtrack.frames import read_test_fps
 from triaxtrack.jsonfile import read_json, write_json
 from triaxtrack.kit import load_kit_design, target_table
@@ -100,6 +101,34 @@ def _posed_again(camera: Camera, xyz: np.ndarray, uv: np.ndarray, moved_px: floa
     return cam if float(np.median(residual)) <= moved_px else None
 
 
+ECCENTRICITY_EVERY = 10  # processed frames between two computations of the marks' eccentricity
+
+
+def _interpolated_eccentricity(ecc_at: dict[int, pd.DataFrame], frame: int, obs: pd.DataFrame) -> np.ndarray:
+    """(N, 2) eccentricity of the observations ``obs`` (``camera, id``) at ``frame``, linear in
+    time between the nearest frames before and after it in ``ecc_at`` (frame -> ``camera, id,
+    eu, ev``); where only one of them has the observation, its value; where neither, 0."""
+    known = np.array(sorted(ecc_at))
+    out = np.zeros((len(obs), 2))
+    if known.size == 0:
+        return out
+    before, after = known[known <= frame], known[known >= frame]
+    ends = [int(before[-1])] if before.size else []
+    ends += [int(after[0])] if after.size and (not ends or after[0] != ends[0]) else []
+    keys = obs[["camera", "id"]].reset_index(drop=True)
+    vals, weights = [], []
+    for f in ends:
+        tab = ecc_at[f].drop_duplicates(["camera", "id"])
+        v = keys.merge(tab, on=["camera", "id"], how="left")[["eu", "ev"]].to_numpy(float)
+        w = 1.0 if len(ends) == 1 else 1.0 - abs(frame - f) / abs(ends[1] - ends[0])
+        vals.append(v)
+        weights.append(np.where(np.isfinite(v[:, 0]), w, 0.0))
+    total = np.sum(weights, axis=0)
+    for v, w in zip(vals, weights, strict=True):
+        out += np.nan_to_num(v) * (w / np.where(total > 0, total, 1.0))[:, None]
+    return out
+
+
 def triangulate_frames(
     cameras: dict[str, Camera],
     tracks: pd.DataFrame,
@@ -110,13 +139,17 @@ def triangulate_frames(
     cfg: TriangulationConfig,
     motion: pd.DataFrame | None = None,
     poses: dict[tuple[str, int], Camera] | None = None,
+    mark_radius_mm: pd.Series | None = None,
 ) -> tuple[pd.DataFrame, pd.DataFrame]:
     """Refractive triangulation of the tracked targets in the water, frame by frame.
 
     ``tracks``: ``TRACKS`` rows of every camera (reported ones are used); ``in_water``: IDs of
     the pedestal and membrane targets; ``frames``: the frames to solve; ``motion`` and
     ``poses``: :func:`camera_motion` (a moved camera is taken in its new pose where it was
-    posed again, and its observations of that frame are left out where not). Returns
+    posed again, and its observations of that frame are left out where not);
+    ``mark_radius_mm``: the marks' printed radii, for their eccentricity
+    (:func:`triaxtrack.triangulate.triangulate_refracted`), computed at every
+    ``ECCENTRICITY_EVERY``-th frame and the last and interpolated between. Returns
     ``(points, residuals)``: ``POINTS`` rows plus ``sigma_mm``, and ``RESIDUALS`` rows (every
     observation offered, whether it was used and why not).
     """
@@ -126,17 +159,32 @@ def triangulate_frames(
     if motion is not None and len(motion):
         m = motion[motion["moved"]]
         moved = set(zip(m["camera"], m["frame"], strict=True)) - set(poses)
-    points, residuals = [], []
-    for frame in np.sort(np.asarray(frames)):
+    frames = np.sort(np.asarray(frames))
+    # the marks' eccentricity is computed at every ECCENTRICITY_EVERY-th frame and the last (so a
+    # frame two chunks share gets the same), and interpolated in time at the frames between
+    eccentric = mark_radius_mm is not None and cfg.eccentricity
+    key = np.unique(np.r_[frames[::ECCENTRICITY_EVERY], frames[-1:]]) if eccentric else frames
+    solved: dict[int, tuple[pd.DataFrame, pd.DataFrame]] = {}
+    ecc_at: dict[int, pd.DataFrame] = {}
+    for frame in [*key, *np.setdiff1d(frames, key)]:
         obs = rep[rep["frame"] == frame][["camera", "frame", "id", "u_px", "v_px"]].reset_index(drop=True)
         if len(obs) == 0:
             continue
         off = np.array([(c, int(frame)) in moved for c in obs["camera"]], bool)
         posed = {name: cam for (name, f), cam in poses.items() if f == frame}
-        res = triangulate_refracted({**cameras, **posed}, obs[~off], cell, cfg)
-        points.append(res.points.assign(frame=int(frame), time_s=float(frame) / fps))
+        given = None if frame in key else _interpolated_eccentricity(ecc_at, int(frame), obs[~off])
+        res = triangulate_refracted({**cameras, **posed}, obs[~off], cell, cfg, mark_radius_mm, given)
+        if eccentric and frame in key:
+            ecc_at[int(frame)] = res.residuals[["camera", "id"]].assign(
+                eu=res.eccentricity_px[:, 0], ev=res.eccentricity_px[:, 1]
+            )
         dropped = obs[off].assign(du_px=np.nan, dv_px=np.nan, used=False, reason="camera moved")
-        residuals.append(pd.concat([res.residuals, dropped], ignore_index=True))
+        solved[int(frame)] = (
+            res.points.assign(frame=int(frame), time_s=float(frame) / fps),
+            pd.concat([res.residuals, dropped], ignore_index=True),
+        )
+    points = [solved[f][0] for f in sorted(solved)]
+    residuals = [solved[f][1] for f in sorted(solved)]
     if not points:
         empty = pd.DataFrame(columns=["frame", "time_s", "id", "x_mm", "y_mm", "z_mm", "n_rays", "rms_px"])
         return empty, pd.DataFrame(columns=["camera", "frame", "id", "u_px", "v_px", "du_px", "dv_px",
@@ -383,7 +431,8 @@ def run_triangulate_chunk(
     sections. Writes the ``points``, ``residuals`` and ``motion`` tables; prints counts."""
     posed = read_cameras(cameras)
     cell = quality_cell(read_json(reference, "quality.json"))
-    table = target_table(load_kit_design(kit))
+    design = load_kit_design(kit)
+    table = target_table(design)
     fps = read_test_fps(test_yaml)
     tracked = concat_tables(tracks, TRACKS)
     if lags:  # P frames moved by each camera's codec lag (rule measure_codec_lag)
@@ -395,7 +444,8 @@ def run_triangulate_chunk(
     in_water = table.loc[table["surface"] != "cell_outer", "id"].to_numpy()
     frames = np.unique(tracked["frame"].to_numpy())
     cfg = TriangulationConfig.from_dict(reconstruction_cfg)
-    pts, res = triangulate_frames(posed, tracked, cell, in_water, frames, fps, cfg, moves, poses)
+    radii = mark_radii(table, design["coded_target"]["centre_radius"])
+    pts, res = triangulate_frames(posed, tracked, cell, in_water, frames, fps, cfg, moves, poses, radii)
     write_table(pts, points, POINTS)
     write_table(res, residuals, RESIDUALS)
     write_table(moves, motion, MOTION)
