@@ -32,9 +32,9 @@ from typing import NamedTuple
 
 import numba
 import numpy as np
-from scipy.spatial import cKDTree
 
 from triaxtrack.kit import membrane_radius
+from triaxtrack.nearest import nearest_within
 from triaxtrack.neighbour_motion import solve3
 from triaxtrack.window import WindowMeasure
 
@@ -109,13 +109,16 @@ def _inner(shape: tuple[int, ...]) -> np.ndarray:
 
 def _near_count(mask: np.ndarray) -> np.ndarray:
     """Per grid cell, the cells of ``mask`` within ``GRID_REACH`` rows and columns (itself
-    included; columns wrap around the specimen, rows do not)."""
-    padded = np.pad(mask, ((GRID_REACH, GRID_REACH), (0, 0))).astype(np.int64)
+    included; columns wrap around the specimen, rows do not): summed along the rows, then down
+    the columns (a box sum in 2 x 5 shifts, not 25)."""
+    mask = mask.astype(np.int64)
+    along = np.zeros(mask.shape, np.int64)
+    for dc in range(-GRID_REACH, GRID_REACH + 1):
+        along += np.roll(mask, dc, axis=1)
+    padded = np.pad(along, ((GRID_REACH, GRID_REACH), (0, 0)))
     near = np.zeros(mask.shape, np.int64)
     for dr in range(2 * GRID_REACH + 1):
-        rows = padded[dr : dr + mask.shape[0]]
-        for dc in range(-GRID_REACH, GRID_REACH + 1):
-            near += np.roll(rows, dc, axis=1)
+        near += padded[dr : dr + mask.shape[0]]
     return near
 
 
@@ -228,7 +231,7 @@ def _row_goes_on(
             & (far.mass >= typical / MASS_RATIO)
         )
     if cell_uv is not None and len(cell_uv):
-        ok |= cKDTree(cell_uv).query(probe)[0] <= step
+        ok |= nearest_within(cell_uv, probe, step)[0] <= step
     return ok
 
 
@@ -287,7 +290,7 @@ def complete_grid(
         )
         tried = np.isfinite(pred).all(axis=1) & (rms <= max_fit_px) & (squeeze >= MIN_VIEW_COS * aspect)
         if cell_uv is not None and len(cell_uv) and tried.any():  # not beside a cell band
-            d, _ = cKDTree(cell_uv).query(np.nan_to_num(pred))
+            d, _ = nearest_within(cell_uv, np.nan_to_num(pred), BAND_REACH * near)
             tried &= d > BAND_REACH * near
         k = np.nonzero(tried)[0]
         if not len(k):
@@ -296,7 +299,7 @@ def complete_grid(
         measured[which[k]] = True
         ok = (meas.reason == "") & (np.linalg.norm(meas.uv - pred[k], axis=1) <= gate * near[k])
         if len(known) and ok.any():  # not on a reported target (nor one taken on this round)
-            d, _ = cKDTree(known).query(np.nan_to_num(meas.uv))
+            d, _ = nearest_within(known, np.nan_to_num(meas.uv), min_separation * near[k])
             ok &= d >= min_separation * near[k]
         with np.errstate(invalid="ignore", divide="ignore"):
             ok &= np.abs(np.log(meas.mass / typical)) <= np.log(MASS_RATIO)

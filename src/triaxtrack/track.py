@@ -75,6 +75,7 @@ from scipy.spatial import cKDTree
 
 from triaxtrack.completion import Candidates, DotGrid, Found, complete_grid, grid_candidates
 from triaxtrack.detect import DetectParams
+from triaxtrack.nearest import crowded
 from triaxtrack.neighbour_motion import affine_flow, reference_places, unwrap_motion
 from triaxtrack.window import WindowMeasure, measure_windows
 
@@ -367,12 +368,8 @@ def _check_measured(
     reason[bad_shape] = "shape"
     jump = measured & (np.linalg.norm(uv - pred, axis=1) > cfg.gate * state.spacing)
     reason[jump & (reason == "")] = "jump"
-    cand = np.nonzero(reason == "")[0]
-    if len(cand) > 1:  # two targets on one blob: both dropped
-        d, nearest = cKDTree(uv[cand]).query(uv[cand], k=2)
-        close = d[:, 1] < cfg.min_separation * state.spacing[cand]
-        reason[cand[close]] = "ambiguous"
-        reason[cand[nearest[close, 1]]] = "ambiguous"
+    cand = np.nonzero(reason == "")[0]  # two targets on one blob: both dropped
+    reason[cand[crowded(uv[cand], cfg.min_separation * state.spacing[cand])]] = "ambiguous"
 
 
 def _check_flow(
