@@ -10,7 +10,8 @@ re-encoded as H.265 (``--codecs``; all in a child process); this prints
 * per codec, the decode-only frame rate (decoding to grey frames as the pipeline does,
   :func:`triaxtrack.frames.iter_test_frames`), and the whole pipeline's (decoding and
   :func:`triaxtrack.track.track_frames` on the same stream, from the first frame's labels of
-  :func:`triaxtrack.identify.label_frame`), and their ratio (the tracker's compiled kernels are
+  :func:`triaxtrack.identify.label_frame`, with the kit's membrane grid for completion as the
+  workflow's default ``tracking.complete_grid`` has it), and their ratio (the tracker's compiled kernels are
   loaded, or compiled, before any timing: once per process);
 * the tracking cost per camera-frame beyond decoding: (pipeline - decode) / frames, and timed
   directly on a few frames held in memory (``--hold``), with the share of ``_step`` and
@@ -266,8 +267,9 @@ def _link_errors(linked: pd.DataFrame, tracks: pd.DataFrame, tol_px: float = 1.0
 class _Clip:
     """The rendered clip and what tracking it needs: ``video`` (H.264) and ``videos`` (per codec
     benchmarked), the ``fmap`` of its ``n`` frames (:func:`triaxtrack.frames.frame_map`), the
-    ``camera`` name and its truth model ``cam``, the ``kit`` design with its CT ``codes`` and the
-    tracking settings ``tcfg``."""
+    ``camera`` name and its truth model ``cam``, the ``kit`` design with its CT ``codes``, the
+    tracking settings ``tcfg`` and the membrane ``grid`` that completion takes dots on from (the
+    workflow's default, ``tracking.complete_grid``)."""
 
     video: Path
     videos: dict[str, Path]
@@ -278,12 +280,14 @@ class _Clip:
     kit: dict
     codes: Any
     tcfg: TrackingConfig
+    grid: Any
 
 
 def _load_clip(sim: dict, codecs: tuple) -> tuple[_Clip, dict]:
     """The rendered clip of :func:`_render_video` (``sim``) read back for tracking, and its
     figures: ``camera``, ``sim`` (the simulation settings), ``render_s``, ``render_peak_mb``, the
     ``video``'s probe, ``video_mb`` and per codec the video's size in MB (``codecs``)."""
+    from triaxtrack.completion import dot_grid
     from triaxtrack.frames import CameraTiming, frame_map
     from triaxtrack.kit import ct_codes, load_kit_design, target_table
     from triaxtrack.optics import read_cameras
@@ -306,7 +310,7 @@ def _load_clip(sim: dict, codecs: tuple) -> tuple[_Clip, dict]:
     cam = read_cameras(sim["test"] / "truth" / "cameras.json")[camera]
     kit = load_kit_design(sim["test"] / "kit")
     codes = ct_codes(kit, target_table(kit))
-    return _Clip(video, videos, camera, fmap, n, cam, kit, codes, TrackingConfig()), figures
+    return _Clip(video, videos, camera, fmap, n, cam, kit, codes, TrackingConfig(), dot_grid(kit)), figures
 
 
 def _label_first_frame(clip: _Clip) -> tuple[pd.DataFrame, dict]:
@@ -326,7 +330,7 @@ def _label_first_frame(clip: _Clip) -> tuple[pd.DataFrame, dict]:
     own = labels[labels["id"] > 0]
     spacing_px = track._init_state(labels, clip.tcfg).spacing
     t0 = time.perf_counter()  # the compiled kernels: loaded from numba's cache (or compiled)
-    track.track_frames([(0, first)], labels, clip.camera, [0], clip.tcfg)
+    track.track_frames([(0, first)], labels, clip.camera, [0], clip.tcfg, clip.grid)
     return labels, {"label_s": label_s, "labelled": own["id"].nunique(), "detections": len(labels),
                     "spacing_px": spacing_px, "warmup_s": time.perf_counter() - t0}  # fmt: skip
 
@@ -340,13 +344,13 @@ def _time_modes(clip: _Clip, labels: pd.DataFrame, repeat: int, codecs: tuple) -
     import triaxtrack.track as track
     from triaxtrack.frames import ProcessedTestFrames, iter_test_frames, keyframe_test_frames
 
-    fmap, n, camera, tcfg, videos = clip.fmap, clip.n, clip.camera, clip.tcfg, clip.videos
+    fmap, n, camera, tcfg, videos, grid = clip.fmap, clip.n, clip.camera, clip.tcfg, clip.videos, clip.grid
 
     def decode(path: Path) -> int:
         return sum(img is not None for _, img in iter_test_frames(path, fmap, 0, n))
 
     def pipeline(path: Path) -> pd.DataFrame:
-        return track.track_frames(iter_test_frames(path, fmap, 0, n), labels, camera, range(n), tcfg)
+        return track.track_frames(iter_test_frames(path, fmap, 0, n), labels, camera, range(n), tcfg, grid)
 
     # fast mode: one processed frame a GOP, on every keyframe (as step_s = gop_s)
     keys = {c: keyframe_test_frames(p, fmap, 0, n) for c, p in videos.items()}
@@ -355,7 +359,7 @@ def _time_modes(clip: _Clip, labels: pd.DataFrame, repeat: int, codecs: tuple) -
     def fast(path: Path) -> pd.DataFrame:
         codec = next(c for c, p in videos.items() if p == path)
         sparse = ProcessedTestFrames(path, fmap, 0, n, keys[codec])
-        out = track.track_frames(sparse, labels, camera, keys[codec], tcfg)
+        out = track.track_frames(sparse, labels, camera, keys[codec], tcfg, grid)
         decoded[codec] = sparse.decoded
         return out
 
@@ -402,7 +406,7 @@ def _time_held(clip: _Clip, labels: pd.DataFrame, held: list[tuple[int, np.ndarr
     for _ in range(3):
         with _Timed(track, "_step") as step, _Timed(track, "measure_targets") as meas:
             t0 = time.perf_counter()
-            track.track_frames(held, labels, clip.camera, [k for k, _ in held], clip.tcfg)
+            track.track_frames(held, labels, clip.camera, [k for k, _ in held], clip.tcfg, clip.grid)
             total = time.perf_counter() - t0
         if best is None or total < best[0]:
             best = (total, step.seconds, meas.seconds)
