@@ -58,7 +58,8 @@ def _centroid_offset(uv_centre: np.ndarray, uv_outline: np.ndarray) -> np.ndarra
     xy = uv_outline - uv_centre[:, None, :]
     n = xy.shape[1]
     k = np.fft.fftfreq(n, 1.0 / n)
-    k[n // 2] = 0.0 if n % 2 == 0 else k[n // 2]  # the Nyquist term has no derivative
+    if n % 2 == 0:
+        k[n // 2] = 0.0  # the Nyquist term has no derivative
     d = np.fft.ifft(1j * k[None, :, None] * np.fft.fft(xy, axis=1), axis=1).real
     x, y, dx, dy = xy[..., 0], xy[..., 1], d[..., 0], d[..., 1]
     with np.errstate(invalid="ignore", divide="ignore"):
