@@ -78,7 +78,7 @@ def test_exact_dot_centroids_give_the_centres_back_only_when_corrected(design, t
     cameras, cell = ring
     pts = design_points(design, table)
     mem = pts[(table["surface"] == "membrane").to_numpy()].iloc[::64]
-    radii = mark_radii(table, design["coded_target"]["centre_radius"])
+    radii = mark_radii(design, table)
     rows = []
     for cam in cameras.values():
         for p in mem.itertuples():
@@ -115,7 +115,7 @@ def test_the_cell_fitted_in_air_from_exact_centroids_has_its_printed_radius(desi
     cameras, _ = ring
     pts = design_points(design, table)
     wall = pts[(table["surface"] == "cell_outer").to_numpy()]
-    radii = mark_radii(table, design["coded_target"]["centre_radius"])
+    radii = mark_radii(design, table)
     rows = []
     for cam in cameras.values():
         xyz = wall[["x_mm", "y_mm", "z_mm"]].to_numpy()

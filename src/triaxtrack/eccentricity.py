@@ -106,9 +106,11 @@ def observation_eccentricity(
     return np.where(np.isfinite(ecc), ecc, 0.0)
 
 
-def mark_radii(table: pd.DataFrame, centre_radius_mm: float) -> pd.Series:
+def mark_radii(design: dict, table: pd.DataFrame) -> pd.Series:
     """Printed radius (mm) of the round mark whose centroid is measured, by target ID: a dot's
-    own radius, a coded target's centre dot (``centre_radius_mm``, the kit's
-    ``coded_target.centre_radius``). ``table``: :func:`triaxtrack.kit.target_table`."""
-    radius = np.where(table["kind"] == "coded", centre_radius_mm, table["diameter_mm"].to_numpy(float) / 2)
+    own radius, a coded target's centre dot (the kit's ``coded_target.centre_radius``).
+    ``design``: the kit (:func:`triaxtrack.kit.load_kit_design`); ``table``: its
+    :func:`triaxtrack.kit.target_table`."""
+    centre = float(design["coded_target"]["centre_radius"])
+    radius = np.where(table["kind"] == "coded", centre, table["diameter_mm"].to_numpy(float) / 2)
     return pd.Series(radius, index=table["id"].to_numpy(), name="mark_radius_mm")

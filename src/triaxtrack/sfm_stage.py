@@ -48,7 +48,7 @@ def run_reconstruct_cell(
     cfg = SfmConfig.from_dict(reconstruction_cfg)
     optics = configured_cell(design, cell_cfg)
     labelled = read_table(labels, LABELS)
-    radii = mark_radii(table, design["coded_target"]["centre_radius"])
+    radii = mark_radii(design, table)
     rec = reconstruct_cell(
         cameras, labelled, design_pts[wall], cfg, water=water, cell=optics, mark_radius_mm=radii
     )

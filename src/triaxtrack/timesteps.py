@@ -444,7 +444,7 @@ def run_triangulate_chunk(
     in_water = table.loc[table["surface"] != "cell_outer", "id"].to_numpy()
     frames = np.unique(tracked["frame"].to_numpy())
     cfg = TriangulationConfig.from_dict(reconstruction_cfg)
-    radii = mark_radii(table, design["coded_target"]["centre_radius"])
+    radii = mark_radii(design, table)
     pts, res = triangulate_frames(posed, tracked, cell, in_water, frames, fps, cfg, moves, poses, radii)
     write_table(pts, points, POINTS)
     write_table(res, residuals, RESIDUALS)

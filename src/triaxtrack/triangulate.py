@@ -564,7 +564,7 @@ def run_trace_specimen(
         read_cameras(cell), read_table(cell_points, POINTS).drop(columns=["frame", "time_s"]),
         read_table(air_residuals, RESIDUALS), labelled, in_water, bottom, optics,
         cell_doc["cell"]["outer_radius_sigma_mm"], TriangulationConfig.from_dict(reconstruction_cfg),
-        REFERENCE_FRAME, REFERENCE_FRAME / fps, mark_radii(table, design["coded_target"]["centre_radius"]),
+        REFERENCE_FRAME, REFERENCE_FRAME / fps, mark_radii(design, table),
     )  # fmt: skip
     membrane_ids = table.loc[table["surface"] == "membrane", "id"].to_numpy()
     report = with_cell_record(quality_report(rec, labelled, membrane_ids), cell_doc, cell_cfg, design)
