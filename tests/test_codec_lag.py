@@ -5,6 +5,7 @@ import pandas as pd
 import pytest
 
 from triaxtrack.codec_lag import (
+    LAG_COLUMNS,
     _coefficients,
     correct_lag,
     corrected_tracks,
@@ -151,10 +152,10 @@ def test_chunks_shorter_than_a_gop_are_measured_and_corrected_from_both_ends(siz
     pd.testing.assert_frame_equal(lags, whole, check_dtype=False)
     path = tmp_path / "cam01.json"
     write_lags(path, "cam01", KEYS, lags)
-    camera, keys, back = read_lags(path)
-    assert camera == "cam01" and np.array_equal(keys, KEYS)
-    pd.testing.assert_frame_equal(back, lags, check_dtype=False)
-    fixed = pd.concat([corrected_tracks(c, {camera: (keys, back)}) for c in chunks])
+    camera, got = read_lags(path)
+    assert camera == "cam01" and np.array_equal(got.keyframes, KEYS) and got.bodies == {}
+    pd.testing.assert_frame_equal(got.lags, lags, check_dtype=False)
+    fixed = pd.concat([corrected_tracks(c, {camera: got}) for c in chunks])
     u = fixed.sort_values(["frame", "id"])[["u_px", "v_px"]].to_numpy().reshape(len(FRAMES), -1, 2)
     err = np.sqrt(((u - truth) ** 2).sum(axis=2).mean(axis=1))
     assert err[~np.isin(FRAMES, KEYS)].max() < 0.025  # 0.014 px of centroid noise
@@ -238,10 +239,9 @@ def test_a_hold_and_a_reversal_within_a_gop_are_not_moved_by_the_ramp_before_the
         "v_px": uv[:, :, 1].ravel(), "area_px": 20.0, "sigma_px": 0.005, "reason": "",
     })  # fmt: skip
     lags = pd.DataFrame(
-        [(k, s, lag, 0.01, *[0.0] * 6, n, 0.3) for k, s in [(0, 1), (30, -1), (30, 1), (60, -1)]],
-        columns=["keyframe", "side", "lag_frames", "sigma_frames", "u0_px", "u_per_u", "u_per_v", "v0_px",
-                 "v_per_u", "v_per_v", "dots", "speed_px"],
-    )  # fmt: skip
+        [("membrane", k, s, lag, 0.01, *[0.0] * 8, n, 0.3) for k, s in [(0, 1), (30, -1), (30, 1), (60, -1)]],
+        columns=list(LAG_COLUMNS),
+    )
     fixed = correct_lag(tracks, KEYS, lags).sort_values(["frame", "id"])
     err = fixed[["u_px", "v_px"]].to_numpy().reshape(len(FRAMES), n, 2) - truth
     hold = [24, 25, 26, 27]  # P frames 9 or more frames from the kinks at 15 and 35

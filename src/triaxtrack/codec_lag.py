@@ -39,7 +39,20 @@ after the last, take the missing end from the neighbouring GOP). What is left: a
 grows within the
 last few frames of a GOP (x264's rate control spends fewer bits on frames no later frame
 refers to) is measured only as its mean over the ``SIDE_FRAMES`` before the keyframe.
-Keyframes, and the other targets (cell wall, pedestal CTs), are left as they are.
+Keyframes are left as they are.
+
+The other targets (the CTs and dots of the cell wall and the pedestals) are few per camera and
+lie on rigid bodies, so their P frames are measured per body (``bodies``: the kit's surfaces
+other than the membrane, :func:`rigid_bodies`) as a common offset ``(u0_px, v0_px)`` only, the
+keyframe's centroids minus the P frames' quadratic extrapolated to it, with its standard error
+from the spread over the body's targets. It is not a lag: on the simulator's H.264 the top cap's
+CTs read 0.011 px lower than the keyframes in every P frame of a test where the cap moves 0.3 px
+a frame (ahead of the motion), and 0.007 px higher (behind it) where it moves 0.005 px a frame;
+uncorrected, that is 3 micrometres of the cap's height in every P frame. One keyframe's offset
+rests on a few targets, so it is pooled, per body and side, over the camera's keyframes where
+the body moves at a similar speed (within ``MAX_SPEED_RATIO``; a hold pools with holds), and
+applied where the pooled offset is at least ``SIGNIFICANT_SIGMAS`` standard errors from zero
+(a body at rest: none).
 
 In the workflow, rule ``measure_codec_lag`` measures one camera at every keyframe of the test
 over its chunks of tracks in order (:func:`estimate_lag_chunks`: a keyframe's two sides may lie
@@ -55,6 +68,7 @@ from __future__ import annotations
 import json
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 import pandas as pd
@@ -71,7 +85,13 @@ MAX_SPEED_RATIO = 1.5  # a keyframe whose two sides' RMS speeds differ more is n
 FIRST_MEMBRANE_ID = 1001  # the membrane dots (target-kit.md): the small dots the field is measured on
 FIELD_SCALE_PX = 1000.0  # the affine field's slopes are per this many pixels
 FIELD_COLUMNS = ("u0_px", "u_per_u", "u_per_v", "v0_px", "v_per_u", "v_per_v")
-LAG_COLUMNS = ("keyframe", "side", "lag_frames", "sigma_frames", *FIELD_COLUMNS, "dots", "speed_px")
+MEMBRANE = "membrane"  # the ``body`` of the membrane dots' rows
+LAG_ORDER = ["body", "keyframe", "side"]  # the rows' order
+MIN_TARGETS = 3  # a rigid body's targets needed (seen in every frame of a side) to measure its offset
+LAG_COLUMNS = (
+    "body", "keyframe", "side", "lag_frames", "sigma_frames", *FIELD_COLUMNS,
+    "sigma_u0_px", "sigma_v0_px", "dots", "speed_px",
+)  # fmt: skip
 
 
 def _quadratic_value_weights(t: np.ndarray) -> np.ndarray:
@@ -103,10 +123,13 @@ def _positions(tracks: pd.DataFrame) -> tuple[np.ndarray, np.ndarray, np.ndarray
     return frames, ids, uv
 
 
-def _side_fit(uv: np.ndarray, frames: np.ndarray, keys: np.ndarray, k: int, side: int) -> tuple | None:
+def _side_fit(
+    uv: np.ndarray, frames: np.ndarray, keys: np.ndarray, k: int, side: int, least: int = MIN_DOTS
+) -> tuple | None:
     """One side of keyframe ``k``: ``(d (n, 2), vel (n, 2), uv_k (n, 2))`` for the dots seen in
     every frame used: the keyframe's centroid minus the P frames' quadratic extrapolated to it,
-    the velocity from the frames beyond, and the keyframe's centroid (None: too few)."""
+    the velocity from the frames beyond, and the keyframe's centroid (None: fewer than
+    ``least`` dots)."""
     side_frames = _side_frames(frames, keys, k, side)
     near, far = side_frames[:SIDE_FRAMES], side_frames[SIDE_FRAMES : SIDE_FRAMES + FAR_FRAMES]
     if len(near) < MIN_SIDE_FRAMES or len(far) < MIN_FAR_FRAMES:
@@ -118,7 +141,7 @@ def _side_fit(uv: np.ndarray, frames: np.ndarray, keys: np.ndarray, k: int, side
     p = uv[np.searchsorted(frames, near)]  # (n, N, 2)
     q = uv[np.searchsorted(frames, far)]
     ok = np.isfinite(p).all(axis=(0, 2)) & np.isfinite(q).all(axis=(0, 2)) & np.isfinite(at_k).all(axis=1)
-    if ok.sum() < MIN_DOTS:
+    if ok.sum() < least:
         return None
     fit = np.einsum("n,nid->id", w_val, p[:, ok])
     vel = np.einsum("n,nid->id", w_slope, q[:, ok])
@@ -150,7 +173,7 @@ def _fit_side(d: np.ndarray, vel: np.ndarray, at_k: np.ndarray) -> tuple:
     y = np.r_[d[:, 0], d[:, 1]]
     active = np.ones(A.shape[1], bool)
     sol = np.zeros(A.shape[1])
-    lag_se = np.inf
+    ses = np.full(A.shape[1], np.nan)  # each coefficient's, from the last fit that held it
     while active.any():
         a = A[:, active]
         coef, *_ = np.linalg.lstsq(a, y, rcond=None)
@@ -159,8 +182,7 @@ def _fit_side(d: np.ndarray, vel: np.ndarray, at_k: np.ndarray) -> tuple:
         se = np.sqrt(s2 * np.diag(np.linalg.pinv(a.T @ a)))
         sol = np.zeros(A.shape[1])
         sol[active] = coef
-        if active[0]:
-            lag_se = float(se[0])
+        ses[active] = se
         t = np.abs(coef) / np.maximum(se, 1e-300)
         weakest = int(np.argmin(t))
         if t[weakest] >= SIGNIFICANT_SIGMAS:
@@ -169,11 +191,32 @@ def _fit_side(d: np.ndarray, vel: np.ndarray, at_k: np.ndarray) -> tuple:
     else:
         sol = np.zeros(A.shape[1])
     speed = float(np.sqrt((vel * vel).sum() / len(vel)))
-    return float(sol[0]), lag_se, *map(float, sol[1:]), len(vel), speed
+    return float(sol[0]), float(ses[0]), *map(float, sol[1:]), float(ses[1]), float(ses[4]), len(vel), speed
+
+
+def _fit_body(d: np.ndarray, vel: np.ndarray, at_k: np.ndarray) -> tuple:
+    """A rigid body's offset on one side of a keyframe, in :func:`_fit_side`'s order: no lag
+    (NaN), the mean departure of its targets ``d`` as the field's constant terms, their standard
+    errors (the spread over the targets), the targets and their RMS speed."""
+    n = len(d)
+    u0, v0 = d.mean(axis=0)
+    su, sv = d.std(axis=0, ddof=1) / np.sqrt(n)
+    speed = float(np.sqrt((vel * vel).sum() / n))
+    return np.nan, np.nan, float(u0), 0.0, 0.0, float(v0), 0.0, 0.0, float(su), float(sv), n, speed
+
+
+def rigid_bodies(table: pd.DataFrame) -> dict[str, list[int]]:
+    """The kit's rigid bodies: surface -> IDs of its targets, for every surface of the
+    target ``table`` (:func:`triaxtrack.kit.target_table`) but the membrane."""
+    rigid = table[table["surface"] != MEMBRANE]
+    return {str(name): sorted(map(int, ids)) for name, ids in rigid.groupby("surface")["id"]}
 
 
 def estimate_lag(
-    tracks: pd.DataFrame, keyframes: np.ndarray, measure: np.ndarray | None = None
+    tracks: pd.DataFrame,
+    keyframes: np.ndarray,
+    measure: np.ndarray | None = None,
+    bodies: Mapping[str, Sequence[int]] | None = None,
 ) -> pd.DataFrame:
     """How one camera's P frames depart from its keyframes, measured at each of its
     ``keyframes`` (test frames) within ``tracks`` (``TRACKS`` rows of one camera; the membrane
@@ -181,16 +224,34 @@ def estimate_lag(
     measured on the ``SIDE_FRAMES + FAR_FRAMES`` frames of the tracks on each side of it (up to
     the next keyframe that way), so the tracks may span a whole test.
 
-    Returns one row per keyframe and side measured: ``keyframe``, ``side`` (-1: the P frames
+    Each rigid body of ``bodies`` (name -> target IDs, :func:`rigid_bodies`) is measured too,
+    as an offset only (:func:`_fit_body`), where at least ``MIN_TARGETS`` of its targets are seen.
+
+    Returns one row per body, keyframe and side measured: ``body`` (``MEMBRANE`` or the rigid
+    body's name), ``keyframe``, ``side`` (-1: the P frames
     before it, +1: after it), ``lag_frames`` (how many frames late those P frames show the
     dots) and ``sigma_frames`` (its standard error), the affine field's coefficients
     ``FIELD_COLUMNS`` (pixels, per ``FIELD_SCALE_PX`` pixels for the slopes: what the P frames
     show minus what the keyframe shows, besides the lag, with the sign reversed) each zeroed
-    where within ``SIGNIFICANT_SIGMAS`` standard errors of zero, ``dots`` used and
-    ``speed_px`` (their RMS speed, pixels per frame).
+    where within ``SIGNIFICANT_SIGMAS`` standard errors of zero, the standard errors of ``u0_px``
+    and ``v0_px`` (``sigma_u0_px``, ``sigma_v0_px``), ``dots`` used and ``speed_px`` (their RMS
+    speed, pixels per frame). A rigid body's rows have no lag (NaN) and no slopes.
     """
-    mem = tracks[tracks["id"] >= FIRST_MEMBRANE_ID].sort_values("frame", kind="stable")
-    f = mem["frame"].to_numpy(np.int64)
+    groups = {MEMBRANE: tracks[tracks["id"] >= FIRST_MEMBRANE_ID]}
+    for name, ids in (bodies or {}).items():
+        groups[name] = tracks[tracks["id"].isin(np.asarray(ids, np.int64))]
+    found = [_estimate_group(name, part, keyframes, measure) for name, part in groups.items()]
+    rows = pd.DataFrame([row for rows in found for row in rows], columns=list(LAG_COLUMNS))
+    return rows.sort_values(LAG_ORDER, kind="stable", ignore_index=True)
+
+
+def _estimate_group(name: str, tracks: pd.DataFrame, keyframes: np.ndarray, measure: np.ndarray | None) -> list:
+    """:func:`estimate_lag`'s rows of one group of targets (``name``: the membrane, fitted by
+    :func:`_fit_side`, or a rigid body, by :func:`_fit_body`)."""
+    membrane = name == MEMBRANE
+    fit, least = (_fit_side, MIN_DOTS) if membrane else (_fit_body, MIN_TARGETS)
+    ordered = tracks.sort_values("frame", kind="stable")
+    f = ordered["frame"].to_numpy(np.int64)
     uf = np.unique(f)
     fences = np.unique(np.asarray(keyframes, np.int64))
     keys = np.intersect1d(fences, uf)
@@ -201,13 +262,13 @@ def estimate_lag(
     for k in keys:
         i = int(np.searchsorted(uf, k))
         lo, hi = uf[max(0, i - reach)], uf[min(len(uf) - 1, i + reach)]
-        near = mem.iloc[np.searchsorted(f, lo) : np.searchsorted(f, hi, side="right")]
+        near = ordered.iloc[np.searchsorted(f, lo) : np.searchsorted(f, hi, side="right")]
         frames, _, uv = _positions(near)
-        sides = {side: _side_fit(uv, frames, fences, int(k), side) for side in (-1, 1)}
+        sides = {side: _side_fit(uv, frames, fences, int(k), side, least) for side in (-1, 1)}
         if _motion_changes(*(got[1] for got in sides.values() if got is not None)):
             continue  # a hold, a reversal or a change of rate at the keyframe: not a lag
-        rows += [(int(k), side, *_fit_side(*got)) for side, got in sides.items() if got is not None]
-    return pd.DataFrame(rows, columns=list(LAG_COLUMNS))
+        rows += [(name, int(k), side, *fit(*got)) for side, got in sides.items() if got is not None]
+    return rows
 
 
 def _motion_changes(*velocities: np.ndarray) -> bool:
@@ -224,8 +285,10 @@ def _motion_changes(*velocities: np.ndarray) -> bool:
     return bool(high > MAX_SPEED_RATIO * low)
 
 
-def estimate_lag_chunks(chunks: Iterable[pd.DataFrame], keyframes: np.ndarray) -> pd.DataFrame:
-    """:func:`estimate_lag` over one camera's chunks of tracks, given in frame order (each
+def estimate_lag_chunks(
+    chunks: Iterable[pd.DataFrame], keyframes: np.ndarray, bodies: Mapping[str, Sequence[int]] | None = None
+) -> pd.DataFrame:
+    """:func:`estimate_lag` (with the rigid ``bodies``) over one camera's chunks of tracks, given in frame order (each
     chunk's ``TRACKS`` without its handover frame), at every keyframe of the test: the frames on
     both sides of a keyframe are used whichever chunks they are in, so every GOP is measured
     at both ends whatever the chunk size. Holds the current chunk and, of the earlier ones, only
@@ -233,6 +296,7 @@ def estimate_lag_chunks(chunks: Iterable[pd.DataFrame], keyframes: np.ndarray) -
     keyframes not yet measured)."""
     keys = np.unique(np.asarray(keyframes, np.int64))
     reach = SIDE_FRAMES + FAR_FRAMES
+    wanted = np.array([i for ids in (bodies or {}).values() for i in ids], np.int64)
     held = pd.DataFrame()
     done: set[int] = set()
     out = []
@@ -246,11 +310,11 @@ def estimate_lag_chunks(chunks: Iterable[pd.DataFrame], keyframes: np.ndarray) -
             if int(k) not in done and (final or len(after) >= reach or fence <= uf[-1]):
                 ready.append(int(k))
         if ready:
-            out.append(estimate_lag(buf, keys, np.array(ready)))
+            out.append(estimate_lag(buf, keys, np.array(ready), bodies))
             done.update(ready)
 
     for chunk in chunks:
-        part = chunk[chunk["id"] >= FIRST_MEMBRANE_ID]
+        part = chunk[(chunk["id"] >= FIRST_MEMBRANE_ID) | chunk["id"].isin(wanted)]
         held = part if held.empty else pd.concat([held, part], ignore_index=True)
         if held.empty:
             continue
@@ -265,7 +329,7 @@ def estimate_lag_chunks(chunks: Iterable[pd.DataFrame], keyframes: np.ndarray) -
         measure(held, final=True)
     if not out:
         return pd.DataFrame(columns=list(LAG_COLUMNS))
-    return pd.concat(out, ignore_index=True).sort_values(["keyframe", "side"], ignore_index=True)
+    return pd.concat(out, ignore_index=True).sort_values(LAG_ORDER, kind="stable", ignore_index=True)
 
 
 def _coefficients(frames: np.ndarray, keyframes: np.ndarray, lags: pd.DataFrame) -> np.ndarray:
@@ -340,86 +404,162 @@ def _velocity(frames: np.ndarray, uv: np.ndarray, keyframes: np.ndarray) -> np.n
     return np.where(good[..., None], slope, np.nan)
 
 
-def correct_lag(tracks: pd.DataFrame, keyframes: np.ndarray, lags: pd.DataFrame) -> pd.DataFrame:
+def correct_lag(
+    tracks: pd.DataFrame,
+    keyframes: np.ndarray,
+    lags: pd.DataFrame,
+    bodies: Mapping[str, Sequence[int]] | None = None,
+) -> pd.DataFrame:
     """A copy of one camera's ``tracks`` with every P frame's reported membrane dots moved by
     the frame's departure from the keyframes (:func:`estimate_lag`, interpolated in time by
     :func:`_coefficients`): forward along the dot's velocity by the lag, and back by the
-    affine field. Keyframes, other targets and frames with nothing measured are left as they are."""
+    affine field; and the targets of each rigid body of ``bodies`` by its pooled offset
+    (:func:`_pooled_offsets`). Keyframes, other targets and frames with nothing measured are
+    left as they are."""
+    out = tracks.copy()
+    rep = (out["reason"] == "").to_numpy()
     mem = (tracks["id"] >= FIRST_MEMBRANE_ID).to_numpy()
     frames, ids, uv = _positions(tracks[mem])
-    coef = np.nan_to_num(_coefficients(frames, keyframes, lags))
-    if not coef.any():
-        return tracks.copy()
-    vel = np.nan_to_num(_velocity(frames, uv, keyframes))
-    x = np.nan_to_num(uv) / FIELD_SCALE_PX
-    c = coef[:, None, :]
-    shift = np.stack([
-        c[..., 0] * vel[..., 0] + c[..., 1] + c[..., 2] * x[..., 0] + c[..., 3] * x[..., 1],
-        c[..., 0] * vel[..., 1] + c[..., 4] + c[..., 5] * x[..., 0] + c[..., 6] * x[..., 1],
-    ], axis=-1)  # fmt: skip
-    out = tracks.copy()
-    rep = mem & (out["reason"] == "").to_numpy()
-    fi = np.searchsorted(frames, out.loc[rep, "frame"].to_numpy(np.int64))
-    ii = np.searchsorted(ids, out.loc[rep, "id"].to_numpy(np.int64))
-    s = shift[fi, ii]
-    out.loc[rep, "u_px"] = out.loc[rep, "u_px"].to_numpy() + s[:, 0]
-    out.loc[rep, "v_px"] = out.loc[rep, "v_px"].to_numpy() + s[:, 1]
+    coef = np.nan_to_num(_coefficients(frames, keyframes, lags[lags["body"] == MEMBRANE]))
+    if coef.any():
+        vel = np.nan_to_num(_velocity(frames, uv, keyframes))
+        x = np.nan_to_num(uv) / FIELD_SCALE_PX
+        c = coef[:, None, :]
+        shift = np.stack([
+            c[..., 0] * vel[..., 0] + c[..., 1] + c[..., 2] * x[..., 0] + c[..., 3] * x[..., 1],
+            c[..., 0] * vel[..., 1] + c[..., 4] + c[..., 5] * x[..., 0] + c[..., 6] * x[..., 1],
+        ], axis=-1)  # fmt: skip
+        _move(out, mem & rep, frames, ids, shift)
+    for name, body_ids in (bodies or {}).items():
+        rows = _pooled_offsets(lags[lags["body"] == name])
+        on = out["id"].isin(np.asarray(body_ids, np.int64)).to_numpy() & rep
+        if not on.any() or rows.empty:
+            continue
+        frames = np.unique(out.loc[on, "frame"].to_numpy(np.int64))
+        coef = np.nan_to_num(_coefficients(frames, keyframes, rows))[:, [1, 4]]
+        if coef.any():
+            one = np.unique(out.loc[on, "id"].to_numpy(np.int64))
+            _move(out, on, frames, one, np.broadcast_to(coef[:, None, :], (len(frames), len(one), 2)))
     return out
 
 
-def lag_corrected(tracks: pd.DataFrame, keyframes: np.ndarray) -> tuple[pd.DataFrame, pd.DataFrame]:
+def _move(out: pd.DataFrame, rows: np.ndarray, frames: np.ndarray, ids: np.ndarray, shift: np.ndarray) -> None:
+    """Add ``shift`` (F, N, 2: pixels, per frame of ``frames`` and ID of ``ids``) to the
+    centroids of ``out``'s selected ``rows`` (a copy being built by :func:`correct_lag`)."""
+    fi = np.searchsorted(frames, out.loc[rows, "frame"].to_numpy(np.int64))
+    ii = np.searchsorted(ids, out.loc[rows, "id"].to_numpy(np.int64))
+    s = shift[fi, ii]
+    out.loc[rows, "u_px"] = out.loc[rows, "u_px"].to_numpy() + s[:, 0]
+    out.loc[rows, "v_px"] = out.loc[rows, "v_px"].to_numpy() + s[:, 1]
+
+
+def _pooled_offsets(rows: pd.DataFrame) -> pd.DataFrame:
+    """One rigid body's rows of :func:`estimate_lag` with each side's offset ``(u0_px, v0_px)``
+    replaced by its mean over the rows of that side whose body moved at a similar speed (within
+    ``MAX_SPEED_RATIO`` of its own), weighted by their targets, and zeroed where within
+    ``SIGNIFICANT_SIGMAS`` standard errors of zero (the targets' scatter pooled over those rows).
+    A keyframe's offset rests on a few targets; the codec's departure is alike at keyframes
+    of one rate of motion."""
+    out = rows.copy()
+    speed = rows["speed_px"].to_numpy(np.float64)
+    side = rows["side"].to_numpy()
+    n = rows["dots"].to_numpy(np.float64)
+    for value, sigma in (("u0_px", "sigma_u0_px"), ("v0_px", "sigma_v0_px")):
+        mean = rows[value].to_numpy(np.float64)
+        scatter2 = rows[sigma].to_numpy(np.float64) ** 2 * n  # each row's targets' variance
+        pooled = np.zeros(len(rows))
+        for i in range(len(rows)):
+            peer = (side == side[i]) & (
+                np.maximum(speed, speed[i]) <= MAX_SPEED_RATIO * np.minimum(speed, speed[i])
+            )
+            m = float((n[peer] * mean[peer]).sum() / n[peer].sum())
+            se = float(np.sqrt(((n[peer] - 1) * scatter2[peer]).sum() / max((n[peer] - 1).sum(), 1) / n[peer].sum()))
+            pooled[i] = m if abs(m) >= SIGNIFICANT_SIGMAS * se else 0.0
+        out[value] = pooled
+    return out
+
+
+def lag_corrected(
+    tracks: pd.DataFrame, keyframes: np.ndarray, bodies: Mapping[str, Sequence[int]] | None = None
+) -> tuple[pd.DataFrame, pd.DataFrame]:
     """One camera's ``tracks`` with the codec's motion lag measured at its ``keyframes`` (test
-    frames) and removed: ``(corrected tracks, lags)`` (:func:`estimate_lag`'s table)."""
-    lags = estimate_lag(tracks, keyframes)
-    return correct_lag(tracks, keyframes, lags), lags
+    frames) and removed (and the offsets of the rigid ``bodies``): ``(corrected tracks, lags)``
+    (:func:`estimate_lag`'s table)."""
+    lags = estimate_lag(tracks, keyframes, bodies=bodies)
+    return correct_lag(tracks, keyframes, lags, bodies), lags
 
 
 # ---------------------------------------------------------------- the per-camera lag file
 
 
 def write_lags(
-    path: str | Path, camera: str, keyframes: np.ndarray, lags: pd.DataFrame, note: str = ""
+    path: str | Path,
+    camera: str,
+    keyframes: np.ndarray,
+    lags: pd.DataFrame,
+    note: str = "",
+    bodies: Mapping[str, Sequence[int]] | None = None,
 ) -> None:
     """Write one camera's measured departures (``results/<test>/codec_lag/<camera>.json``):
-    its keyframes (test frames, every one of the test), :func:`estimate_lag`'s rows and a
-    ``note`` (why nothing is measured or applied, if so)."""
+    its keyframes (test frames, every one of the test), :func:`estimate_lag`'s rows (null
+    where NaN), the rigid ``bodies`` they were measured on (name -> target IDs) and a ``note``
+    (why nothing is measured or applied, if so)."""
+    rows = lags[list(LAG_COLUMNS)].astype({"body": str}).to_numpy(object).tolist()
     doc = {
         "camera": camera,
         "keyframes": [int(k) for k in np.asarray(keyframes, np.int64)],
         "columns": list(LAG_COLUMNS),
-        "lags": lags[list(LAG_COLUMNS)].astype(float).to_numpy().tolist(),
+        "lags": [[_json_value(v) for v in row] for row in rows],
+        "bodies": {str(name): [int(i) for i in ids] for name, ids in (bodies or {}).items()},
         "note": note,
     }
-    Path(path).write_text(json.dumps(doc, indent=1) + "\n")
+    Path(path).write_text(json.dumps(doc, indent=1, allow_nan=False) + "\n")
 
 
-def read_lags(path: str | Path) -> tuple[str, np.ndarray, pd.DataFrame]:
-    """``(camera, keyframes, lags)`` of a file written by :func:`write_lags`."""
+def _json_value(v: object) -> object:
+    """A table cell as JSON: numbers as Python numbers, NaN as null, strings as they are."""
+    if isinstance(v, str):
+        return v
+    x = float(v)  # type: ignore[arg-type]
+    return None if np.isnan(x) else (int(x) if x.is_integer() and abs(x) < 2**53 else x)
+
+
+class LagFile(NamedTuple):
+    """One camera's file of :func:`write_lags`, as :func:`correct_lag` takes it."""
+
+    keyframes: np.ndarray
+    lags: pd.DataFrame
+    bodies: dict[str, list[int]]
+
+
+def read_lags(path: str | Path) -> tuple[str, LagFile]:
+    """``(camera, LagFile(keyframes, lags, bodies))`` of a file written by :func:`write_lags`."""
     try:
         doc = json.loads(Path(path).read_text())
         lags = pd.DataFrame(doc["lags"], columns=doc["columns"])
         keys = np.asarray(doc["keyframes"], np.int64)
         camera = str(doc["camera"])
-    except (OSError, ValueError, KeyError, TypeError) as err:
+        bodies = {str(k): [int(i) for i in v] for k, v in doc["bodies"].items()}
+        if list(lags.columns) != list(LAG_COLUMNS):
+            raise ValueError(f"columns {list(lags.columns)}, expected {list(LAG_COLUMNS)}")
+        numbers = [c for c in LAG_COLUMNS if c != "body"]
+        lags = lags.astype({"body": str, **dict.fromkeys(numbers, np.float64)})
+    except (OSError, ValueError, KeyError, TypeError, AttributeError) as err:
         raise ValueError(f"{path}: not a codec-lag file ({err})") from None
-    if list(lags.columns) != list(LAG_COLUMNS):
-        raise ValueError(f"{path}: columns {list(lags.columns)}, expected {list(LAG_COLUMNS)}")
-    return camera, keys, lags.astype({"keyframe": np.int64, "side": np.int64, "dots": np.int64})
+    return camera, LagFile(keys, lags.astype({"keyframe": np.int64, "side": np.int64, "dots": np.int64}), bodies)
 
 
-def read_lag_files(paths: Iterable[str | Path]) -> dict[str, tuple[np.ndarray, pd.DataFrame]]:
-    """Camera -> ``(keyframes, lags)`` of several files written by :func:`write_lags` (the
+def read_lag_files(paths: Iterable[str | Path]) -> dict[str, LagFile]:
+    """Camera -> its :class:`LagFile` of several files written by :func:`write_lags` (the
     argument of :func:`corrected_tracks`)."""
-    return {camera: (keys, lags) for camera, keys, lags in map(read_lags, paths)}
+    return dict(map(read_lags, paths))
 
 
-def corrected_tracks(
-    tracks: pd.DataFrame, lags: Mapping[str, tuple[np.ndarray, pd.DataFrame]]
-) -> pd.DataFrame:
+def corrected_tracks(tracks: pd.DataFrame, lags: Mapping[str, LagFile | tuple]) -> pd.DataFrame:
     """A copy of ``tracks`` (``TRACKS`` rows of any cameras, e.g. one chunk's) with each camera's
-    P frames corrected by :func:`correct_lag` from its ``(keyframes, lags)`` in ``lags`` (every
-    keyframe of the test, so a GOP cut by the chunk is corrected from both its ends); cameras
-    not in ``lags`` are left as they are."""
+    P frames corrected by :func:`correct_lag` from its ``(keyframes, lags[, bodies])`` in
+    ``lags`` (every keyframe of the test, so a GOP cut by the chunk is corrected from both its
+    ends); cameras not in ``lags`` are left as they are."""
     out = tracks.copy()
     for camera, pos in tracks.groupby("camera", sort=False).indices.items():
         if camera in lags:
@@ -429,18 +569,27 @@ def corrected_tracks(
 
 
 def run_measure_codec_lag(
-    *, camera: str, tracks: Sequence[str | Path], video: str | Path, frames: str | Path, lags: str | Path
+    *,
+    camera: str,
+    tracks: Sequence[str | Path],
+    video: str | Path,
+    frames: str | Path,
+    kit: str | Path,
+    lags: str | Path,
 ) -> None:
     """Rule measure_codec_lag: :func:`estimate_lag_chunks` of one ``camera`` over its chunks'
-    ``tracks`` in order, at every keyframe of its ``video`` (frame map ``frames``), written to
-    ``lags`` (:func:`write_lags`, with a note when nothing could be measured); prints the rows."""
+    ``tracks`` in order, at every keyframe of its ``video`` (frame map ``frames``), with the
+    rigid bodies of the ``kit`` folder's design, written to ``lags`` (:func:`write_lags`, with a
+    note when nothing could be measured); prints the rows."""
     from triaxtrack.frames import keyframe_test_frames
+    from triaxtrack.kit import load_kit_design, target_table
     from triaxtrack.tables import FRAME_MAP, TRACKS, read_table
 
     fmap = read_table(frames, FRAME_MAP)
     keys = keyframe_test_frames(video, fmap, 0, len(fmap))
-    found = estimate_lag_chunks((read_table(path, TRACKS) for path in tracks), keys)
+    bodies = rigid_bodies(target_table(load_kit_design(kit)))
+    found = estimate_lag_chunks((read_table(path, TRACKS) for path in tracks), keys, bodies)
     note = "" if len(found) else "not measured: no keyframe with enough P frames on either side"
-    write_lags(lags, camera, keys, found, note)
+    write_lags(lags, camera, keys, found, note, bodies)
     print(f"{camera}: P frames against keyframes {keys.tolist()} (triaxtrack.codec_lag):")
     print(note or found.to_string(index=False))

@@ -38,6 +38,7 @@ rule measure_codec_lag:
         tracks=get_camera_tracks,
         video=get_camera_video,
         frames="results/{test}/frames/{camera}.parquet",
+        kit=get_test_kit,
     output:
         lags="results/{test}/codec_lag/{camera}.json",
     log:

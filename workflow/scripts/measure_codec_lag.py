@@ -7,6 +7,6 @@ log_to(snakemake.log[0])
 
 i = snakemake.input
 run_measure_codec_lag(
-    camera=snakemake.wildcards.camera, tracks=i.tracks, video=i.video, frames=i.frames,
+    camera=snakemake.wildcards.camera, tracks=i.tracks, video=i.video, frames=i.frames, kit=i.kit,
     lags=snakemake.output.lags,
 )  # fmt: skip
