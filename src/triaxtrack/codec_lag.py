@@ -90,7 +90,7 @@ LAG_ORDER = ["body", "keyframe", "side"]  # the rows' order
 MIN_TARGETS = 3  # a rigid body's targets needed (seen in every frame of a side) to measure its offset
 LAG_COLUMNS = (
     "body", "keyframe", "side", "lag_frames", "sigma_frames", *FIELD_COLUMNS,
-    "sigma_u0_px", "sigma_v0_px", "dots", "speed_px",
+    "sigma_u0_px", "sigma_v0_px", "dots", "speed_px", "sigma_speed_px",
 )  # fmt: skip
 
 
@@ -191,18 +191,43 @@ def _fit_side(d: np.ndarray, vel: np.ndarray, at_k: np.ndarray) -> tuple:
     else:
         sol = np.zeros(A.shape[1])
     speed = float(np.sqrt((vel * vel).sum() / len(vel)))
-    return float(sol[0]), float(ses[0]), *map(float, sol[1:]), float(ses[1]), float(ses[4]), len(vel), speed
+    return float(sol[0]), float(ses[0]), *map(float, sol[1:]), float(ses[1]), float(ses[4]), len(vel), speed, np.nan
 
 
 def _fit_body(d: np.ndarray, vel: np.ndarray, at_k: np.ndarray) -> tuple:
     """A rigid body's offset on one side of a keyframe, in :func:`_fit_side`'s order: no lag
     (NaN), the mean departure of its targets ``d`` as the field's constant terms, their standard
-    errors (the spread over the targets), the targets and their RMS speed."""
+    errors (the spread over the targets), the targets, and the body's speed with its standard
+    error (:func:`_body_speed`)."""
     n = len(d)
     u0, v0 = d.mean(axis=0)
     su, sv = d.std(axis=0, ddof=1) / np.sqrt(n)
-    speed = float(np.sqrt((vel * vel).sum() / n))
-    return np.nan, np.nan, float(u0), 0.0, 0.0, float(v0), 0.0, 0.0, float(su), float(sv), n, speed
+    return np.nan, np.nan, float(u0), 0.0, 0.0, float(v0), 0.0, 0.0, float(su), float(sv), n, *_body_speed(vel)
+
+
+def _body_speed(vel: np.ndarray) -> tuple[float, float]:
+    """A rigid body's speed (pixels per frame): the length of its targets' mean velocity (``vel``,
+    (n, 2)), and its standard error from their scatter. A body moves as one: the mean is not
+    raised by the targets' noise, as the RMS of their speeds is when the motion is slow."""
+    mean = vel.mean(axis=0)
+    se = float(np.sqrt((vel.var(axis=0, ddof=1)).sum() / len(vel)))
+    return float(np.hypot(*mean)), se
+
+
+def _speeds_differ(a: float, sa: float, b: float, sb: float) -> bool:
+    """Whether two speeds (with standard errors) differ by more than ``MAX_SPEED_RATIO`` allows
+    beyond ``SIGNIFICANT_SIGMAS`` standard errors: a rigid body's motion changed between them."""
+    slack = (MAX_SPEED_RATIO - 1.0) * min(a, b) + SIGNIFICANT_SIGMAS * float(np.hypot(sa, sb))
+    return abs(a - b) > slack
+
+
+def _body_motion_changes(*velocities: np.ndarray) -> bool:
+    """:func:`_motion_changes` for a rigid body: its speeds (:func:`_body_speed`) on the two
+    sides of a keyframe differ (:func:`_speeds_differ`). A few targets moving 0.005 px a frame
+    under 0.003 px of centroid noise: a ratio of their RMS speeds would be noise."""
+    if len(velocities) < 2:
+        return False
+    return _speeds_differ(*_body_speed(velocities[0]), *_body_speed(velocities[1]))
 
 
 def rigid_bodies(table: pd.DataFrame) -> dict[str, list[int]]:
@@ -235,7 +260,9 @@ def estimate_lag(
     show minus what the keyframe shows, besides the lag, with the sign reversed) each zeroed
     where within ``SIGNIFICANT_SIGMAS`` standard errors of zero, the standard errors of ``u0_px``
     and ``v0_px`` (``sigma_u0_px``, ``sigma_v0_px``), ``dots`` used and ``speed_px`` (their RMS
-    speed, pixels per frame). A rigid body's rows have no lag (NaN) and no slopes.
+    speed, pixels per frame). A rigid body's rows have no lag (NaN) and no slopes, and its speed
+    is the length of its mean velocity, with its standard error ``sigma_speed_px`` (NaN for
+    the membrane).
     """
     groups = {MEMBRANE: tracks[tracks["id"] >= FIRST_MEMBRANE_ID]}
     for name, ids in (bodies or {}).items():
@@ -265,7 +292,8 @@ def _estimate_group(name: str, tracks: pd.DataFrame, keyframes: np.ndarray, meas
         near = ordered.iloc[np.searchsorted(f, lo) : np.searchsorted(f, hi, side="right")]
         frames, _, uv = _positions(near)
         sides = {side: _side_fit(uv, frames, fences, int(k), side, least) for side in (-1, 1)}
-        if _motion_changes(*(got[1] for got in sides.values() if got is not None)):
+        seen = [got[1] for got in sides.values() if got is not None]
+        if _motion_changes(*seen) if membrane else _body_motion_changes(*seen):
             continue  # a hold, a reversal or a change of rate at the keyframe: not a lag
         rows += [(name, int(k), side, *fit(*got)) for side, got in sides.items() if got is not None]
     return rows
@@ -455,26 +483,27 @@ def _move(out: pd.DataFrame, rows: np.ndarray, frames: np.ndarray, ids: np.ndarr
 
 def _pooled_offsets(rows: pd.DataFrame) -> pd.DataFrame:
     """One rigid body's rows of :func:`estimate_lag` with each side's offset ``(u0_px, v0_px)``
-    replaced by its mean over the rows of that side whose body moved at a similar speed (within
-    ``MAX_SPEED_RATIO`` of its own), weighted by their targets, and zeroed where within
-    ``SIGNIFICANT_SIGMAS`` standard errors of zero (the targets' scatter pooled over those rows).
-    A keyframe's offset rests on a few targets; the codec's departure is alike at keyframes
-    of one rate of motion."""
+    replaced by its mean over the rows of that side where the body moved at a similar speed
+    (:func:`_speeds_differ`: a hold pools with holds), weighted by their targets, and zeroed
+    where within ``SIGNIFICANT_SIGMAS`` standard errors of zero (the targets' scatter pooled over
+    those rows). A keyframe's offset rests on a few targets; the codec's departure is alike at
+    keyframes of one rate of motion."""
     out = rows.copy()
-    speed = rows["speed_px"].to_numpy(np.float64)
+    speed = rows[["speed_px", "sigma_speed_px"]].to_numpy(np.float64)
     side = rows["side"].to_numpy()
     n = rows["dots"].to_numpy(np.float64)
+    peers = [
+        (side == side[i]) & np.array([not _speeds_differ(*speed[i], *speed[j]) for j in range(len(rows))])
+        for i in range(len(rows))
+    ]
     for value, sigma in (("u0_px", "sigma_u0_px"), ("v0_px", "sigma_v0_px")):
         mean = rows[value].to_numpy(np.float64)
         scatter2 = rows[sigma].to_numpy(np.float64) ** 2 * n  # each row's targets' variance
         pooled = np.zeros(len(rows))
-        for i in range(len(rows)):
-            peer = (side == side[i]) & (
-                np.maximum(speed, speed[i]) <= MAX_SPEED_RATIO * np.minimum(speed, speed[i])
-            )
+        for i, peer in enumerate(peers):
             m = float((n[peer] * mean[peer]).sum() / n[peer].sum())
-            se = float(np.sqrt(((n[peer] - 1) * scatter2[peer]).sum() / max((n[peer] - 1).sum(), 1) / n[peer].sum()))
-            pooled[i] = m if abs(m) >= SIGNIFICANT_SIGMAS * se else 0.0
+            var = ((n[peer] - 1) * scatter2[peer]).sum() / max((n[peer] - 1).sum(), 1)
+            pooled[i] = m if abs(m) >= SIGNIFICANT_SIGMAS * np.sqrt(var / n[peer].sum()) else 0.0
         out[value] = pooled
     return out
 
