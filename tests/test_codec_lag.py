@@ -239,7 +239,10 @@ def test_a_hold_and_a_reversal_within_a_gop_are_not_moved_by_the_ramp_before_the
         "v_px": uv[:, :, 1].ravel(), "area_px": 20.0, "sigma_px": 0.005, "reason": "",
     })  # fmt: skip
     lags = pd.DataFrame(
-        [("membrane", k, s, lag, 0.01, *[0.0] * 8, n, 0.3) for k, s in [(0, 1), (30, -1), (30, 1), (60, -1)]],
+        [
+            ("membrane", k, s, lag, 0.01, *[0.0] * 8, n, 0.3, np.nan)
+            for k, s in [(0, 1), (30, -1), (30, 1), (60, -1)]
+        ],
         columns=list(LAG_COLUMNS),
     )
     fixed = correct_lag(tracks, KEYS, lags).sort_values(["frame", "id"])

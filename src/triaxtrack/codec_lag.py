@@ -72,6 +72,7 @@ from typing import NamedTuple
 
 import numpy as np
 import pandas as pd
+from numpy.typing import ArrayLike
 
 SIDE_FRAMES = 5  # P frames extrapolated to the keyframe on each side (at least MIN_SIDE_FRAMES)
 MIN_SIDE_FRAMES = 4  # fewer on a side: that side of the keyframe is not measured
@@ -191,7 +192,16 @@ def _fit_side(d: np.ndarray, vel: np.ndarray, at_k: np.ndarray) -> tuple:
     else:
         sol = np.zeros(A.shape[1])
     speed = float(np.sqrt((vel * vel).sum() / len(vel)))
-    return float(sol[0]), float(ses[0]), *map(float, sol[1:]), float(ses[1]), float(ses[4]), len(vel), speed, np.nan
+    return (
+        float(sol[0]),
+        float(ses[0]),
+        *map(float, sol[1:]),
+        float(ses[1]),
+        float(ses[4]),
+        len(vel),
+        speed,
+        np.nan,
+    )
 
 
 def _fit_body(d: np.ndarray, vel: np.ndarray, at_k: np.ndarray) -> tuple:
@@ -202,7 +212,20 @@ def _fit_body(d: np.ndarray, vel: np.ndarray, at_k: np.ndarray) -> tuple:
     n = len(d)
     u0, v0 = d.mean(axis=0)
     su, sv = d.std(axis=0, ddof=1) / np.sqrt(n)
-    return np.nan, np.nan, float(u0), 0.0, 0.0, float(v0), 0.0, 0.0, float(su), float(sv), n, *_body_speed(vel)
+    return (
+        np.nan,
+        np.nan,
+        float(u0),
+        0.0,
+        0.0,
+        float(v0),
+        0.0,
+        0.0,
+        float(su),
+        float(sv),
+        n,
+        *_body_speed(vel),
+    )
 
 
 def _body_speed(vel: np.ndarray) -> tuple[float, float]:
@@ -214,11 +237,12 @@ def _body_speed(vel: np.ndarray) -> tuple[float, float]:
     return float(np.hypot(*mean)), se
 
 
-def _speeds_differ(a: float, sa: float, b: float, sb: float) -> bool:
-    """Whether two speeds (with standard errors) differ by more than ``MAX_SPEED_RATIO`` allows
-    beyond ``SIGNIFICANT_SIGMAS`` standard errors: a rigid body's motion changed between them."""
-    slack = (MAX_SPEED_RATIO - 1.0) * min(a, b) + SIGNIFICANT_SIGMAS * float(np.hypot(sa, sb))
-    return abs(a - b) > slack
+def _speeds_differ(a: ArrayLike, sa: ArrayLike, b: ArrayLike, sb: ArrayLike) -> np.ndarray:
+    """Whether two speeds (with standard errors; arrays broadcast) differ by more than
+    ``MAX_SPEED_RATIO`` allows beyond ``SIGNIFICANT_SIGMAS`` standard errors: a rigid body's
+    motion changed between them."""
+    slack = (MAX_SPEED_RATIO - 1.0) * np.minimum(a, b) + SIGNIFICANT_SIGMAS * np.hypot(sa, sb)
+    return np.abs(np.subtract(a, b)) > slack
 
 
 def _body_motion_changes(*velocities: np.ndarray) -> bool:
@@ -227,7 +251,7 @@ def _body_motion_changes(*velocities: np.ndarray) -> bool:
     under 0.003 px of centroid noise: a ratio of their RMS speeds would be noise."""
     if len(velocities) < 2:
         return False
-    return _speeds_differ(*_body_speed(velocities[0]), *_body_speed(velocities[1]))
+    return bool(_speeds_differ(*_body_speed(velocities[0]), *_body_speed(velocities[1])))
 
 
 def rigid_bodies(table: pd.DataFrame) -> dict[str, list[int]]:
@@ -272,7 +296,9 @@ def estimate_lag(
     return rows.sort_values(LAG_ORDER, kind="stable", ignore_index=True)
 
 
-def _estimate_group(name: str, tracks: pd.DataFrame, keyframes: np.ndarray, measure: np.ndarray | None) -> list:
+def _estimate_group(
+    name: str, tracks: pd.DataFrame, keyframes: np.ndarray, measure: np.ndarray | None
+) -> list:
     """:func:`estimate_lag`'s rows of one group of targets (``name``: the membrane, fitted by
     :func:`_fit_side`, or a rigid body, by :func:`_fit_body`)."""
     membrane = name == MEMBRANE
@@ -441,9 +467,9 @@ def correct_lag(
     """A copy of one camera's ``tracks`` with every P frame's reported membrane dots moved by
     the frame's departure from the keyframes (:func:`estimate_lag`, interpolated in time by
     :func:`_coefficients`): forward along the dot's velocity by the lag, and back by the
-    affine field; and the targets of each rigid body of ``bodies`` by its pooled offset
-    (:func:`_pooled_offsets`). Keyframes, other targets and frames with nothing measured are
-    left as they are."""
+    affine field; and the targets of each rigid body of ``bodies`` by its rows' offset
+    ``(u0_px, v0_px)`` (give them pooled: :func:`pooled_offsets`). Keyframes, other targets
+    and frames with nothing measured are left as they are."""
     out = tracks.copy()
     rep = (out["reason"] == "").to_numpy()
     mem = (tracks["id"] >= FIRST_MEMBRANE_ID).to_numpy()
@@ -459,7 +485,7 @@ def correct_lag(
         ], axis=-1)  # fmt: skip
         _move(out, mem & rep, frames, ids, shift)
     for name, body_ids in (bodies or {}).items():
-        rows = _pooled_offsets(lags[lags["body"] == name])
+        rows = lags[lags["body"] == name]
         on = out["id"].isin(np.asarray(body_ids, np.int64)).to_numpy() & rep
         if not on.any() or rows.empty:
             continue
@@ -471,7 +497,9 @@ def correct_lag(
     return out
 
 
-def _move(out: pd.DataFrame, rows: np.ndarray, frames: np.ndarray, ids: np.ndarray, shift: np.ndarray) -> None:
+def _move(
+    out: pd.DataFrame, rows: np.ndarray, frames: np.ndarray, ids: np.ndarray, shift: np.ndarray
+) -> None:
     """Add ``shift`` (F, N, 2: pixels, per frame of ``frames`` and ID of ``ids``) to the
     centroids of ``out``'s selected ``rows`` (a copy being built by :func:`correct_lag`)."""
     fi = np.searchsorted(frames, out.loc[rows, "frame"].to_numpy(np.int64))
@@ -481,21 +509,37 @@ def _move(out: pd.DataFrame, rows: np.ndarray, frames: np.ndarray, ids: np.ndarr
     out.loc[rows, "v_px"] = out.loc[rows, "v_px"].to_numpy() + s[:, 1]
 
 
+def pooled_offsets(lags: Mapping[str, pd.DataFrame]) -> dict[str, pd.DataFrame]:
+    """Each camera's rows of :func:`estimate_lag` (camera -> table) with every rigid body's
+    offsets pooled over all the cameras (:func:`_pooled_offsets`); the membrane's rows as they
+    are. One keyframe's offset in one camera rests on a few targets (about 5 of the top cap's
+    CTs: 0.002-0.003 px standard error against a departure of 0.005-0.01 px); the departure is
+    the codec's response to the motion, alike in cameras of one recorder seeing the body move
+    at a similar speed."""
+    tables = {camera: t.reset_index(drop=True) for camera, t in lags.items()}
+    rigid = [t[t["body"] != MEMBRANE].assign(camera=camera) for camera, t in tables.items()]
+    every = pd.concat(rigid, ignore_index=True) if rigid else pd.DataFrame(columns=["body", "camera"])
+    out = {camera: t.copy() for camera, t in tables.items()}
+    for _, rows in every.groupby("body"):
+        pooled = _pooled_offsets(rows)
+        for camera, part in pooled.groupby("camera"):
+            mine = out[str(camera)]
+            at = mine.index[mine["body"] == part["body"].iloc[0]]
+            mine.loc[at, ["u0_px", "v0_px"]] = part[["u0_px", "v0_px"]].to_numpy()
+    return out
+
+
 def _pooled_offsets(rows: pd.DataFrame) -> pd.DataFrame:
-    """One rigid body's rows of :func:`estimate_lag` with each side's offset ``(u0_px, v0_px)``
-    replaced by its mean over the rows of that side where the body moved at a similar speed
-    (:func:`_speeds_differ`: a hold pools with holds), weighted by their targets, and zeroed
-    where within ``SIGNIFICANT_SIGMAS`` standard errors of zero (the targets' scatter pooled over
-    those rows). A keyframe's offset rests on a few targets; the codec's departure is alike at
-    keyframes of one rate of motion."""
+    """One rigid body's rows of :func:`estimate_lag` (any cameras) with each side's offset
+    ``(u0_px, v0_px)`` replaced by its mean over the rows of that side where the body moved at a
+    similar speed (:func:`_speeds_differ`: a hold pools with holds), weighted by their targets,
+    and zeroed where within ``SIGNIFICANT_SIGMAS`` standard errors of zero (the targets' scatter
+    pooled over those rows)."""
     out = rows.copy()
-    speed = rows[["speed_px", "sigma_speed_px"]].to_numpy(np.float64)
+    v, sv = (rows[c].to_numpy(np.float64)[:, None] for c in ("speed_px", "sigma_speed_px"))
     side = rows["side"].to_numpy()
     n = rows["dots"].to_numpy(np.float64)
-    peers = [
-        (side == side[i]) & np.array([not _speeds_differ(*speed[i], *speed[j]) for j in range(len(rows))])
-        for i in range(len(rows))
-    ]
+    peers = (side[:, None] == side[None, :]) & ~_speeds_differ(v, sv, v.T, sv.T)  # (R, R)
     for value, sigma in (("u0_px", "sigma_u0_px"), ("v0_px", "sigma_v0_px")):
         mean = rows[value].to_numpy(np.float64)
         scatter2 = rows[sigma].to_numpy(np.float64) ** 2 * n  # each row's targets' variance
@@ -515,7 +559,7 @@ def lag_corrected(
     frames) and removed (and the offsets of the rigid ``bodies``): ``(corrected tracks, lags)``
     (:func:`estimate_lag`'s table)."""
     lags = estimate_lag(tracks, keyframes, bodies=bodies)
-    return correct_lag(tracks, keyframes, lags, bodies), lags
+    return correct_lag(tracks, keyframes, pooled_offsets({"": lags})[""], bodies), lags
 
 
 # ---------------------------------------------------------------- the per-camera lag file
@@ -575,7 +619,9 @@ def read_lags(path: str | Path) -> tuple[str, LagFile]:
         lags = lags.astype({"body": str, **dict.fromkeys(numbers, np.float64)})
     except (OSError, ValueError, KeyError, TypeError, AttributeError) as err:
         raise ValueError(f"{path}: not a codec-lag file ({err})") from None
-    return camera, LagFile(keys, lags.astype({"keyframe": np.int64, "side": np.int64, "dots": np.int64}), bodies)
+    return camera, LagFile(
+        keys, lags.astype({"keyframe": np.int64, "side": np.int64, "dots": np.int64}), bodies
+    )
 
 
 def read_lag_files(paths: Iterable[str | Path]) -> dict[str, LagFile]:
@@ -588,11 +634,14 @@ def corrected_tracks(tracks: pd.DataFrame, lags: Mapping[str, LagFile | tuple]) 
     """A copy of ``tracks`` (``TRACKS`` rows of any cameras, e.g. one chunk's) with each camera's
     P frames corrected by :func:`correct_lag` from its ``(keyframes, lags[, bodies])`` in
     ``lags`` (every keyframe of the test, so a GOP cut by the chunk is corrected from both its
-    ends); cameras not in ``lags`` are left as they are."""
+    ends), the rigid bodies' offsets pooled over the cameras (:func:`pooled_offsets`); cameras
+    not in ``lags`` are left as they are."""
     out = tracks.copy()
+    pooled = pooled_offsets({camera: got[1] for camera, got in lags.items()})
     for camera, pos in tracks.groupby("camera", sort=False).indices.items():
         if camera in lags:
-            fixed = correct_lag(tracks.iloc[pos], *lags[camera])
+            keys, _, *bodies = lags[camera]
+            fixed = correct_lag(tracks.iloc[pos], keys, pooled[camera], *bodies)
             out.iloc[pos, out.columns.get_indexer(["u_px", "v_px"])] = fixed[["u_px", "v_px"]].to_numpy()
     return out
 
