@@ -6,7 +6,6 @@ import pytest
 
 from triaxtrack.codec_lag import (
     LAG_COLUMNS,
-    _coefficients,
     correct_lag,
     corrected_tracks,
     estimate_lag,
@@ -15,6 +14,7 @@ from triaxtrack.codec_lag import (
     read_lags,
     write_lags,
 )
+from triaxtrack.codec_lag.correct import _coefficients
 
 FRAMES = np.arange(61)
 KEYS = np.array([0, 30, 60])
