@@ -262,3 +262,92 @@ def test_test_yaml_load_frame_schema():
     bad = {**doc, "load_frame": {**entry, "columns": cols}}
     problems = " ".join(schema_problems(bad, schema, [("t.yaml", bad)]))
     assert "axial_lod" in problems and "axial_load" in problems
+
+
+def _ar1(rng, n: int, sigma: float, rho: float) -> np.ndarray:
+    x = np.empty(n)
+    x[0] = rng.normal(0.0, sigma)
+    for i in range(1, n):
+        x[i] = rho * x[i - 1] + rng.normal(0.0, sigma * np.sqrt(1 - rho**2))
+    return x
+
+
+def test_clock_offset_exact_and_honest():
+    """On noise-free data the offset is exact to a small part of a millisecond (the log read by
+    a monotone cubic does not cut the changes of rate between its samples, as a straight line
+    did by 0.4-0.7 ms); over seeds with white and persistent (AR(1)) height errors the offset's
+    sigma is honest (RMS error/sigma near 1) and its RMS error about a millisecond."""
+    frames = 200
+    z = []
+    for seed in range(10):
+        offset = OFFSET_S + 0.0137 * seed  # a different phase of the log's samples each time
+        lf = {"clock_offset_s": offset}
+        cfg = SimulationConfig.from_dict(
+            {"seed": seed, "frames": frames, "loading_history": HISTORY, "load_frame": lf}
+        )
+        log, truth, _ = simulate_load_frame(cfg, DEFORMATION)
+        t_log = log[LOG_COLUMNS["time"][0]].to_numpy()
+        h, t = truth["height_mm"].to_numpy(), truth["time_s"].to_numpy()
+        if seed < 2:  # exact: the LVDT's travel without noise
+            lvdt = LoadFrameSimulation().lvdt_zero_mm + h[0] - h
+            est = estimate_clock_offset(t_log, np.interp(t_log - offset, t, lvdt), t, h[0] - h)
+            assert abs(est.offset_s - offset) < 2e-4  # s (a line: up to 7e-4)
+        rng = np.random.default_rng(100 + seed)
+        hm = h + rng.normal(0.0, 0.002, frames) + _ar1(rng, frames, 0.0015, 0.9)
+        est = estimate_clock_offset(t_log, log[LOG_COLUMNS["axial_displacement"][0]], t, hm[0] - hm)
+        z.append((est.offset_s - offset) / est.sigma_s)
+        assert est.rho > 0.5 and est.correlated_mm > 5e-4  # the persistent part is seen
+        assert abs(est.offset_s - offset) * cfg.fps < 0.1
+    rms = float(np.sqrt(np.mean(np.square(z))))
+    assert 0.5 < rms < 1.6, z
+
+
+def test_noise_model_whitens_like_the_covariance():
+    """The Kalman whitening of NoiseModel equals the inverse Cholesky factor of its covariance."""
+    from triaxtrack.stress.clock import NoiseModel
+
+    m = NoiseModel(white_var=4.0, corr_var=2.0, rho=0.8)
+    n = 30
+    k = np.arange(n)
+    cov = m.white_var * np.eye(n) + m.corr_var * m.rho ** np.abs(np.subtract.outer(k, k))
+    a = np.random.default_rng(1).normal(size=(n, 3))
+    expected = np.linalg.solve(np.linalg.cholesky(cov), a)
+    assert np.allclose(m.whitener(n)(a), expected, atol=1e-10)
+    fitted = NoiseModel.from_residuals(_ar1(np.random.default_rng(2), 4000, 1.0, 0.85))
+    assert abs(fitted.rho - 0.85) < 0.05 and abs(fitted.corr_var - 1.0) < 0.25
+
+
+def test_load_uncertainty_parts():
+    """The chord error of a straight line between log samples is within 2 sigma on a change of
+    rate (half of it at the worst point) and within 1 sigma on a curve, and nil on a line; the
+    load's resolution is the logged step."""
+    from triaxtrack.stress.compute import interpolation_sigma, load_resolution
+
+    log_t = np.arange(0.0, 3.0, 0.1)
+    t = np.linspace(0.05, 2.9, 97)
+    for f in (lambda x: np.maximum(x - 1.234, 0) * 80.0, lambda x: 50 * np.sqrt(x + 0.2), lambda x: 3 * x):
+        err = np.abs(np.interp(t, log_t, f(log_t)) - f(t))
+        sig = interpolation_sigma(t, log_t, f(log_t), 0.0)
+        assert np.all(err <= 2 * sig + 1e-9)
+        assert np.all(sig <= 2.5 * err.max() + 1e-9)  # not loose by more than the bound's factor
+    curve = lambda x: 50 * np.sqrt(x + 0.2)  # noqa: E731
+    assert np.all(
+        np.abs(np.interp(t, log_t, curve(log_t)) - curve(t))
+        <= interpolation_sigma(t, log_t, curve(log_t), 0) + 1e-9
+    )
+    assert np.allclose(interpolation_sigma(t, log_t, 3 * log_t, 0.0), 0.0)
+    assert load_resolution(np.round(np.linspace(0, 7, 500), 1) * 1000) == pytest.approx(100.0)
+
+
+def test_q_uncertainty_is_honest(tmp_path, simulated):
+    """With exact areas, q's sigma (the load's noise and resolution, the chord error, the zero,
+    the offset's uncertainty times the load's rate) holds its error: RMS error/sigma 0.5-1.4,
+    at least 90 % of the frames within 2 sigma."""
+    cfg, log, truth, meta = simulated
+    lg, vol, est = log_and_offset(tmp_path, log, truth)
+    sec = truth[["frame", "area_mid_mm2", "area_min_mm2"]]
+    vol = vol.assign(volume_mm3=truth["area_mean_mm2"] * vol["height_mm"], volume_sigma_mm3=0.0)
+    out = stress_strain(vol, sec, lg, est.offset_s, DESIGN, StressConfig(), est.sigma_s)
+    z = ((out["q_mean_kpa"] - truth["q_mean_kpa"]) / out["q_mean_sigma_kpa"]).to_numpy()
+    assert 0.5 < np.sqrt(np.mean(z**2)) < 1.4
+    assert np.mean(np.abs(z) < 2) >= 0.9
