@@ -187,22 +187,30 @@ def pooled_offsets(lags: Mapping[str, pd.DataFrame]) -> dict[str, pd.DataFrame]:
 def _pooled_offsets(rows: pd.DataFrame) -> pd.DataFrame:
     """One rigid body's rows of :func:`estimate_lag` (any cameras) with each side's offset
     ``(u0_px, v0_px)`` replaced by its mean over the rows of that side where the body moved at a
-    similar speed (:func:`_speeds_differ`: a hold pools with holds), weighted by their targets,
-    and zeroed where within ``SIGNIFICANT_SIGMAS`` standard errors of zero (the targets' scatter
-    pooled over those rows)."""
+    similar speed (:func:`_speeds_differ`: a hold pools with holds), zeroed where within
+    ``SIGNIFICANT_SIGMAS`` standard errors of zero. The mean's variance: the rows' spread over
+    their targets averages down over every row, their frames' common jitter only over the
+    distinct keyframes (the cameras may share it: one keyframe seen by 13 cameras is one sample
+    of it).
+    """
     out = rows.copy()
     v, sv = (rows[c].to_numpy(np.float64)[:, None] for c in ("speed_px", "sigma_speed_px"))
     side = rows["side"].to_numpy()
-    n = rows["dots"].to_numpy(np.float64)
+    key = rows["keyframe"].to_numpy()
     peers = (side[:, None] == side[None, :]) & ~_speeds_differ(v, sv, v.T, sv.T)  # (R, R)
-    for value, sigma in (("u0_px", "sigma_u0_px"), ("v0_px", "sigma_v0_px")):
+    for value, sigma, common in (
+        ("u0_px", "sigma_u0_px", "common_u0_px"),
+        ("v0_px", "sigma_v0_px", "common_v0_px"),
+    ):
         mean = rows[value].to_numpy(np.float64)
-        scatter2 = rows[sigma].to_numpy(np.float64) ** 2 * n  # each row's targets' variance
+        own2 = np.nan_to_num(rows[sigma].to_numpy(np.float64) ** 2)
+        shared2 = np.nan_to_num(rows[common].to_numpy(np.float64) ** 2)
         pooled = np.zeros(len(rows))
         for i, peer in enumerate(peers):
-            m = float((n[peer] * mean[peer]).sum() / n[peer].sum())
-            var = ((n[peer] - 1) * scatter2[peer]).sum() / max((n[peer] - 1).sum(), 1)
-            pooled[i] = m if abs(m) >= SIGNIFICANT_SIGMAS * np.sqrt(var / n[peer].sum()) else 0.0
+            n, keys = int(peer.sum()), len(np.unique(key[peer]))
+            m = float(mean[peer].mean())
+            se = np.sqrt(own2[peer].mean() / n + shared2[peer].mean() / keys)
+            pooled[i] = m if abs(m) >= SIGNIFICANT_SIGMAS * se else 0.0
         out[value] = pooled
     return out
 

@@ -27,7 +27,7 @@ LAG_ORDER = ["body", "keyframe", "side"]  # the rows' order
 MIN_TARGETS = 3  # a rigid body's targets needed (seen in every frame of a side) to measure its offset
 LAG_COLUMNS = (
     "body", "keyframe", "side", "lag_frames", "sigma_frames", *FIELD_COLUMNS,
-    "sigma_u0_px", "sigma_v0_px", "dots", "speed_px", "sigma_speed_px",
+    "sigma_u0_px", "sigma_v0_px", "common_u0_px", "common_v0_px", "dots", "speed_px", "sigma_speed_px",
 )  # fmt: skip
 
 
@@ -63,10 +63,15 @@ def _positions(tracks: pd.DataFrame) -> tuple[np.ndarray, np.ndarray, np.ndarray
 def _side_fit(
     uv: np.ndarray, frames: np.ndarray, keys: np.ndarray, k: int, side: int, least: int = MIN_DOTS
 ) -> tuple | None:
-    """One side of keyframe ``k``: ``(d (n, 2), vel (n, 2), uv_k (n, 2))`` for the dots seen in
-    every frame used: the keyframe's centroid minus the P frames' quadratic extrapolated to it,
-    the velocity from the frames beyond, and the keyframe's centroid (None: fewer than
-    ``least`` dots)."""
+    """One side of keyframe ``k``: ``(d (n, 2), vel (n, 2), uv_k (n, 2), common (2,))`` for the
+    dots seen in every frame used: the keyframe's centroid minus the P frames' quadratic
+    extrapolated to it, the velocity from the frames beyond, the keyframe's centroid, and the
+    standard error that the frames' common jitter gives the dots' mean ``d`` (None: fewer than
+    ``least`` dots). The common jitter is the scatter of the dots' mean residual about their
+    quadratics from frame to frame; it enters through the extrapolation's weights and through
+    the keyframe's own frame. A rigid body's targets share it, and so may the cameras: on a
+    realistic 720p render the top cap's CTs jumped together by 0.03-0.06 px from frame to frame
+    in every camera at once."""
     side_frames = _side_frames(frames, keys, k, side)
     near, far = side_frames[:SIDE_FRAMES], side_frames[SIDE_FRAMES : SIDE_FRAMES + FAR_FRAMES]
     if len(near) < MIN_SIDE_FRAMES or len(far) < MIN_FAR_FRAMES:
@@ -82,7 +87,14 @@ def _side_fit(
         return None
     fit = np.einsum("n,nid->id", w_val, p[:, ok])
     vel = np.einsum("n,nid->id", w_slope, q[:, ok])
-    return at_k[ok] - fit, vel, at_k[ok]
+    t = (near - k).astype(np.float64)
+    basis = np.c_[np.ones_like(t), t, t * t]
+    resid = p[:, ok] - np.einsum(
+        "nc,cid->nid", basis, np.einsum("cn,nid->cid", np.linalg.pinv(basis), p[:, ok])
+    )
+    jitter2 = (resid.mean(axis=1) ** 2).sum(axis=0) / max(len(near) - 3, 1)  # (2,)
+    common = np.sqrt(jitter2 * (1.0 + float(w_val @ w_val)))
+    return at_k[ok] - fit, vel, at_k[ok], common
 
 
 def _design(vel: np.ndarray, uv: np.ndarray) -> np.ndarray:
@@ -97,7 +109,7 @@ def _design(vel: np.ndarray, uv: np.ndarray) -> np.ndarray:
     return A
 
 
-def _fit_side(d: np.ndarray, vel: np.ndarray, at_k: np.ndarray) -> tuple:
+def _fit_side(d: np.ndarray, vel: np.ndarray, at_k: np.ndarray, common: np.ndarray) -> tuple:
     """The lag and field coefficients of one side's departures (see :func:`estimate_lag`), by
     backward elimination: the coefficient least distinguishable from zero (under
     ``SIGNIFICANT_SIGMAS`` standard errors) is dropped and the others fitted again, until all
@@ -105,7 +117,8 @@ def _fit_side(d: np.ndarray, vel: np.ndarray, at_k: np.ndarray) -> tuple:
     itself a field across the image (a uniform axial strain moves them in proportion to their
     height): zeroing one of such a pair after a joint fit left half a correction, of the wrong
     size. Returns the lag, its standard error (from the last fit that held it), the field's six
-    coefficients (0 where dropped), the dots and their RMS speed."""
+    coefficients (0 where dropped), the standard errors of its constant terms (from the spread
+    over the dots and from the frames' ``common`` jitter), the dots and their RMS speed."""
     A = _design(vel, at_k)
     y = np.r_[d[:, 0], d[:, 1]]
     active = np.ones(A.shape[1], bool)
@@ -134,17 +147,19 @@ def _fit_side(d: np.ndarray, vel: np.ndarray, at_k: np.ndarray) -> tuple:
         *map(float, sol[1:]),
         float(ses[1]),
         float(ses[4]),
+        *map(float, common),
         len(vel),
         speed,
         np.nan,
     )
 
 
-def _fit_body(d: np.ndarray, vel: np.ndarray, at_k: np.ndarray) -> tuple:
+def _fit_body(d: np.ndarray, vel: np.ndarray, at_k: np.ndarray, common: np.ndarray) -> tuple:
     """A rigid body's offset on one side of a keyframe, in :func:`_fit_side`'s order: no lag
     (NaN), the mean departure of its targets ``d`` as the field's constant terms, their standard
-    errors (the spread over the targets), the targets, and the body's speed with its standard
-    error (:func:`_body_speed`)."""
+    errors from the spread over the targets and from the frames' ``common`` jitter
+    (:func:`_side_fit`), the targets, and the body's speed with its standard error
+    (:func:`_body_speed`)."""
     n = len(d)
     u0, v0 = d.mean(axis=0)
     su, sv = d.std(axis=0, ddof=1) / np.sqrt(n)
@@ -159,6 +174,7 @@ def _fit_body(d: np.ndarray, vel: np.ndarray, at_k: np.ndarray) -> tuple:
         0.0,
         float(su),
         float(sv),
+        *map(float, common),
         n,
         *_body_speed(vel),
     )
@@ -219,7 +235,8 @@ def estimate_lag(
     ``FIELD_COLUMNS`` (pixels, per ``FIELD_SCALE_PX`` pixels for the slopes: what the P frames
     show minus what the keyframe shows, besides the lag, with the sign reversed) each zeroed
     where within ``SIGNIFICANT_SIGMAS`` standard errors of zero, the standard errors of ``u0_px``
-    and ``v0_px`` (``sigma_u0_px``, ``sigma_v0_px``), ``dots`` used and ``speed_px`` (their RMS
+    and ``v0_px`` from the spread over the dots (``sigma_u0_px``, ``sigma_v0_px``) and from the
+    frames' common jitter (``common_u0_px``, ``common_v0_px``), ``dots`` used and ``speed_px`` (their RMS
     speed, pixels per frame). A rigid body's rows have no lag (NaN) and no slopes, and its speed
     is the length of its mean velocity, with its standard error ``sigma_speed_px`` (NaN for
     the membrane).
