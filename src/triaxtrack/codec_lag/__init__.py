@@ -44,15 +44,19 @@ Keyframes are left as they are.
 The other targets (the CTs and dots of the cell wall and the pedestals) are few per camera and
 lie on rigid bodies, so their P frames are measured per body (``bodies``: the kit's surfaces
 other than the membrane, :func:`rigid_bodies`) as a common offset ``(u0_px, v0_px)`` only, the
-keyframe's centroids minus the P frames' quadratic extrapolated to it, with its standard error
-from the spread over the body's targets. It is not a lag: on the simulator's H.264 the top cap's
-CTs read 0.011 px lower than the keyframes in every P frame of a test where the cap moves 0.3 px
-a frame (ahead of the motion), and 0.007 px higher (behind it) where it moves 0.005 px a frame;
-uncorrected, that is 3 micrometres of the cap's height in every P frame. One keyframe's offset
-rests on a few targets, so it is pooled, per body and side, over the camera's keyframes where
-the body moves at a similar speed (within ``MAX_SPEED_RATIO``; a hold pools with holds), and
-applied where the pooled offset is at least ``SIGNIFICANT_SIGMAS`` standard errors from zero
-(a body at rest: none).
+keyframe's centroids minus the P frames' quadratic extrapolated to it. It is not a lag: on the
+simulator's H.264 the top cap's CTs read 0.011 px lower than the keyframes in every P frame of a
+test where the cap moves 0.3 px a frame (ahead of the motion), and 0.008 px higher (behind it),
+reached after some 10 frames, where it moves 0.001 px a frame; uncorrected, that is 2-3
+micrometres of the cap's height in every P frame. One keyframe's offset rests on a few targets,
+so it is pooled (:func:`pooled_offsets`), per body and side, over every camera's keyframes where
+the body moves at a similar speed (a hold pools with holds), and applied where the pooled offset
+is at least ``SIGNIFICANT_SIGMAS`` standard errors from zero. Its standard error has two parts:
+the spread over the targets, which averages down over every camera, and the frames' common
+jitter (the body's targets jumping together from frame to frame, in every camera at once on a
+realistic 720p render), which averages down only over distinct keyframes. Across the GOP the
+offset moves from the value after its keyframe to the value before the next no faster than the
+body moves (:func:`~triaxtrack.codec_lag.correct._coefficients` with ``rise``).
 
 In the workflow, rule ``measure_codec_lag`` measures one camera at every keyframe of the test
 over its chunks of tracks in order (:func:`estimate_lag_chunks`: a keyframe's two sides may lie
