@@ -22,6 +22,8 @@ from triaxtrack.codec_lag.measure import (
     estimate_lag,
 )
 
+MIN_SPREAD_KEYFRAMES = 3  # keyframes (of one side) whose scatter gives a pooled offset's standard error
+
 
 def _coefficients(
     frames: np.ndarray, keyframes: np.ndarray, lags: pd.DataFrame, rise: bool = False
@@ -188,10 +190,12 @@ def _pooled_offsets(rows: pd.DataFrame) -> pd.DataFrame:
     """One rigid body's rows of :func:`estimate_lag` (any cameras) with each side's offset
     ``(u0_px, v0_px)`` replaced by its mean over the rows of that side where the body moved at a
     similar speed (:func:`_speeds_differ`: a hold pools with holds), zeroed where within
-    ``SIGNIFICANT_SIGMAS`` standard errors of zero. The mean's variance: the rows' spread over
-    their targets averages down over every row, their frames' common jitter only over the
-    distinct keyframes (the cameras may share it: one keyframe seen by 13 cameras is one sample
-    of it).
+    ``SIGNIFICANT_SIGMAS`` standard errors of zero. The mean's variance: with
+    ``MIN_SPREAD_KEYFRAMES`` distinct keyframes or more, the scatter of their means (over the
+    cameras) over their number, whatever the cameras share (but no less than the targets' spread
+    over every row); with fewer, the rows' spread over their targets averaged down over every
+    row, and their frames' common jitter only over the distinct keyframes (the cameras may share
+    it: one keyframe seen by 13 cameras is then one sample of it).
     """
     out = rows.copy()
     v, sv = (rows[c].to_numpy(np.float64)[:, None] for c in ("speed_px", "sigma_speed_px"))
@@ -207,9 +211,13 @@ def _pooled_offsets(rows: pd.DataFrame) -> pd.DataFrame:
         shared2 = np.nan_to_num(rows[common].to_numpy(np.float64) ** 2)
         pooled = np.zeros(len(rows))
         for i, peer in enumerate(peers):
-            n, keys = int(peer.sum()), len(np.unique(key[peer]))
+            n = int(peer.sum())
+            per_key = pd.Series(mean[peer]).groupby(key[peer]).mean().to_numpy()
             m = float(mean[peer].mean())
-            se = np.sqrt(own2[peer].mean() / n + shared2[peer].mean() / keys)
+            if len(per_key) >= MIN_SPREAD_KEYFRAMES:  # the keyframes' own scatter says how well
+                se = np.sqrt(max(per_key.var(ddof=1) / len(per_key), own2[peer].mean() / n))
+            else:  # too few to tell: the jitter taken as shared by every camera
+                se = np.sqrt(own2[peer].mean() / n + shared2[peer].mean() / len(per_key))
             pooled[i] = m if abs(m) >= SIGNIFICANT_SIGMAS * se else 0.0
         out[value] = pooled
     return out
