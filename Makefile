@@ -2,7 +2,7 @@
 #   make install   create $(VENV) (if missing) and install triaxtrack with its dev tools
 #   make run       the workflow with the default config (simulates and checks `demo`)
 #   make test      the test suite (what CI runs, after `make lint`)
-#   make lint      ruff, snakefmt and snakemake --lint
+#   make lint      ruff, snakefmt, snakemake --lint and mypy
 #   make dag       dry run, and the rule graph in results/rulegraph.dot
 #   make bench     benchmarks (print figures; never assert a time)
 #   make clean     remove results/, logs/, benchmarks/ and Snakemake's run state
@@ -36,6 +36,7 @@ lint: $(STAMP)
 	$(BIN)/ruff check .
 	$(BIN)/snakefmt --check Snakefile workflow/
 	$(BIN)/snakemake --lint
+	$(BIN)/mypy src/triaxtrack
 
 # Installs trackpy (extra `bench`) once, for the linking comparison; the bench runs without it.
 # Options: make bench BENCH_ARGS="--size 1280x720 --frames 12" (see python bench/pipeline.py -h).

@@ -68,23 +68,34 @@ class CodeBook:
         return best_id, int(d[i]), int(self.words[i]), int(other.min()) if len(other) else 99
 
 
-def _ct_geometry(ct: dict) -> dict[str, float]:
+@dataclass(frozen=True)
+class _CtGeometry:
+    """Sampling radii of a CT in units of its centre-dot radius: in the white gap (``inner``),
+    across the code ring (``ring``), in the white surround (``outer``); ``extent``: the label's."""
+
+    inner: float
+    ring: tuple[float, ...]
+    outer: float
+    extent: float
+
+
+def _ct_geometry(ct: dict) -> _CtGeometry:
     """Sampling radii of a CT in units of its centre-dot radius."""
     rc, r0, r1 = ct["centre_radius"], ct["ring_inner_radius"], ct["ring_outer_radius"]
     label = ct.get("label_radius", r1 + 1.2)
-    return {
-        "inner": (rc + CT_INNER_WHITE * (r0 - rc)) / rc,
-        "ring": tuple((r0 + f * (r1 - r0)) / rc for f in CT_RING_RADII),
-        "outer": (r1 + CT_OUTER_WHITE * (label - r1)) / rc,
-        "extent": label / rc,
-    }
+    return _CtGeometry(
+        inner=(rc + CT_INNER_WHITE * (r0 - rc)) / rc,
+        ring=tuple((r0 + f * (r1 - r0)) / rc for f in CT_RING_RADII),
+        outer=(r1 + CT_OUTER_WHITE * (label - r1)) / rc,
+        extent=label / rc,
+    )
 
 
-def _ct_radii(geo: dict[str, float]) -> list[float]:
+def _ct_radii(geo: _CtGeometry) -> list[float]:
     """The radii a CT is sampled on, in units of its centre-dot radius (``geo``:
     :func:`_ct_geometry`), in this order: three in the centre dot (0..2), the white gap (3), the
     code ring's (4 .. -2), the white surround (-1)."""
-    return [0.0, CT_CENTRE_FRACTION * 0.5, CT_CENTRE_FRACTION, geo["inner"], *geo["ring"], geo["outer"]]
+    return [0.0, CT_CENTRE_FRACTION * 0.5, CT_CENTRE_FRACTION, geo.inner, *geo.ring, geo.outer]
 
 
 def _ct_candidates(blobs: pd.DataFrame, p: DetectParams) -> np.ndarray:
@@ -209,7 +220,7 @@ def _drop_code_pieces(
     the label's radius in centre-dot radii."""
     centres = out[["u_px", "v_px"]].to_numpy()
     pos = {b: i for i, b in enumerate(blob_index)}
-    keep = []
+    keep: list[int] = []
     for a in range(len(out)):
         ma = maps[pos[out.blob.iloc[a]]]
         inside = [
@@ -265,10 +276,10 @@ def decode_coded_targets(
         rows.append(dict(
             id=tid, blob=int(sub.index[i]), u_px=centre[i, 0], v_px=centre[i, 1],
             confidence=float(best_conf[i]), distance=dist, white=float(white[i]),
-            black=float(black[i]), extent_px=float(np.linalg.norm(maps[i], 2) * geo["extent"]),
+            black=float(black[i]), extent_px=float(np.linalg.norm(maps[i], 2) * geo.extent),
             sectors=int(best_known[i].sum()),
         ))  # fmt: skip
     out = pd.DataFrame(rows, columns=cols)
     dup = out.id.duplicated(keep=False)
     out = out[~dup].sort_values("confidence", ascending=False)
-    return _drop_code_pieces(out, maps, sub.index, geo["extent"]).sort_values("id").reset_index(drop=True)
+    return _drop_code_pieces(out, maps, sub.index, geo.extent).sort_values("id").reset_index(drop=True)

@@ -345,10 +345,8 @@ def _found(ids: np.ndarray, sel: np.ndarray, parts: list) -> Found:
     rounds ``parts`` ((candidate indices, the grid's spacing, radius, WindowMeasure)),
     in candidate order."""
     if not parts:
-        empty = np.zeros(0)
-        return Found(
-            ids[:0], empty, empty, WindowMeasure(np.zeros((0, 2)), *([empty] * 6), np.zeros(0, object))
-        )
+        e = np.zeros(0)
+        return Found(ids[:0], e, e, WindowMeasure(np.zeros((0, 2)), e, e, e, e, e, e, np.zeros(0, object)))
     which = np.concatenate([p[0] for p in parts])
     order = np.argsort(which)
     take = sel[which[order]]

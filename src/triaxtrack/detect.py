@@ -91,7 +91,7 @@ def background(gray: np.ndarray, size_px: int) -> np.ndarray:
     bg = cv2.resize(small.astype(np.float32), (wp, hp), interpolation=cv2.INTER_LINEAR)[:h, :w]
     # the pooled grid is offset by half a cell: shift back
     if f > 1:
-        m = np.float32([[1, 0, (f - 1) / 2], [0, 1, (f - 1) / 2]])
+        m = np.array([[1, 0, (f - 1) / 2], [0, 1, (f - 1) / 2]], np.float32)
         bg = cv2.warpAffine(bg, m, (w, h), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
     return np.maximum(bg, g.astype(np.float32))
 

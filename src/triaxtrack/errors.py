@@ -119,8 +119,8 @@ def _describe(error: jsonschema.ValidationError) -> list[tuple[list[object], str
             has = ", ".join(f"`{k}`" for k in instance) or "none"
             what = f"needs exactly one of {' or '.join(forms)}; it has {has}"
         else:
-            what = jsonschema.exceptions.best_match(error.context).message if error.context else None
-            what = what or f"{_short(instance)} does not have an allowed form"
+            best = jsonschema.exceptions.best_match(error.context).message if error.context else None
+            what = best or f"{_short(instance)} does not have an allowed form"
         return [(path, f"{description}: {what}" if description else what)]
     message = error.message
     text = repr(instance)
@@ -188,7 +188,7 @@ def failed_jobs(snakemake_log: str) -> list[dict[str, Any]]:
             jobs.append(current)
             continue
         field = _BLOCK_FIELD.match(line) if current is not None else None
-        if field is None:
+        if field is None or current is None:  # (field is None whenever current is)
             current = None if not line.startswith(" ") else current
             continue
         if field["key"] == "wildcards":

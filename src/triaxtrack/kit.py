@@ -553,7 +553,8 @@ def export_kit(design: dict, out_dir: str | Path) -> None:
     for s in surf:
         rgba = render_texture(design, s["name"], shapes)
         cv2.imwrite(str(out / s["texture"]), cv2.cvtColor(rgba, cv2.COLOR_RGBA2BGRA))
-        black, white = [], []
+        black: list[np.ndarray] = []
+        white: list[np.ndarray] = []
         width = 2 * np.pi * s["radius"]
         for sh in shapes:
             if sh.surface != s["name"]:

@@ -64,12 +64,13 @@ def _draw_view(
         else:
             for x in (-r, r):
                 ax.plot([x, x], [cell.z_min, cell.z_max], color=CELL, lw=1.0)
-    ax.scatter(*xyz[is_cell][:, cols].T, s=2, color=CELL_TARGETS, label="cell-wall targets")
-    dots = ax.scatter(*xyz[~is_cell][:, cols].T, s=2, c=xyz[~is_cell, 2], cmap=HEIGHTS_CMAP,
+    wall, inside = xyz[is_cell][:, cols], xyz[~is_cell][:, cols]
+    ax.scatter(wall[:, 0], wall[:, 1], s=2, color=CELL_TARGETS, label="cell-wall targets")
+    dots = ax.scatter(inside[:, 0], inside[:, 1], s=2, c=xyz[~is_cell, 2], cmap=HEIGHTS_CMAP,
                       vmin=z_range[0], vmax=z_range[1], label="specimen and pedestal targets")  # fmt: skip
     for k, cam in enumerate(cameras.values()):
         tip = cam.center + AXIS_ARROW_MM * cam.R[2]  # the optical axis
-        a, b = cam.center[cols], tip[cols]
+        a, b = tuple(cam.center[cols]), tuple(tip[cols])
         ax.annotate("", xy=b, xytext=a, arrowprops={"arrowstyle": "->", "color": CAMERA, "lw": 1.5})
         ax.plot(*a, "o", color=CAMERA, ms=3, label="cameras (optical axis)" if k == 0 else None)
         ax.annotate(cam.name, a, xytext=(4, 4), textcoords="offset points", fontsize=7)

@@ -52,7 +52,7 @@ def polygon_coverage(
 
 def packed_polygon_coverage(
     vertices: np.ndarray,
-    counts: np.ndarray,
+    counts: np.ndarray | Sequence[int],
     height: int,
     width: int,
     subrows: int = DEFAULT_SUBROWS,
@@ -114,7 +114,11 @@ def packed_polygon_coverage(
 
 
 def paint(
-    image: np.ndarray, vertices: np.ndarray, counts: np.ndarray, value: float, subrows: int = DEFAULT_SUBROWS
+    image: np.ndarray,
+    vertices: np.ndarray,
+    counts: np.ndarray | Sequence[int],
+    value: float,
+    subrows: int = DEFAULT_SUBROWS,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Paint packed polygons of grey ``value`` over ``image`` with exact area coverage.
 
@@ -129,7 +133,11 @@ def paint(
 
 
 def paint_into(
-    image: np.ndarray, vertices: np.ndarray, counts: np.ndarray, value: float, subrows: int = DEFAULT_SUBROWS
+    image: np.ndarray,
+    vertices: np.ndarray,
+    counts: np.ndarray | Sequence[int],
+    value: float,
+    subrows: int = DEFAULT_SUBROWS,
 ) -> tuple[int, np.ndarray]:
     """In-place :func:`paint` for a renderer's own frame buffer.
 

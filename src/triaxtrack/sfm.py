@@ -145,7 +145,7 @@ def initial_poses(
         uv = obs[["u_px", "v_px"]].to_numpy(np.float64)
         pose = pnp_pose(cam, X, uv, cfg.ransac_px)
         inlier = pose[1] if pose is not None else np.zeros(len(obs), bool)
-        if inlier.sum() < cfg.min_targets:
+        if pose is None or inlier.sum() < cfg.min_targets:
             dropped[name] = f"PnP found {int(inlier.sum())} consistent cell-wall targets of {len(obs)}"
             continue
         posed[name] = pose[0]
@@ -502,7 +502,7 @@ def reconstruct_cell(
     unlike = rec is not None and not is_printed_cell(rec)
     if unlike and through_water:
         rec = None
-    if rec is None and through_water:
+    if rec is None and through_water and cell is not None:  # (through_water implies a cell)
         why = (
             "no cell frame from the wall"
             if len(posed) < 2
@@ -512,7 +512,7 @@ def reconstruct_cell(
         )
         rec = _nominal_reconstruction(cell, labels)
         dropped = {n: dropped.get(n, f"{why}: posed through it") for n in cameras}
-    if rec is not None and through_water and dropped:
+    if rec is not None and through_water and cell is not None and dropped:
         rec = _add_water_cameras(rec, cameras, labels, design, water, cell, cfg, dropped, mark_radius_mm)
         dropped = rec.dropped
     if rec is None or len(rec.cameras) < 2:

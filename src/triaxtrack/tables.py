@@ -10,6 +10,7 @@ with ``n_rays < 2`` are not expected to be reconstructed.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -145,7 +146,7 @@ a CT, 0.9 for dots found by interpolation or the grid walk, 0.5 for two membrane
 one blob and fitted apart, each with its own row: half the blob's area, the fit's roundness)."""
 
 
-def concat_tables(paths: list[str | Path], schema: Schema) -> pd.DataFrame:
+def concat_tables(paths: Sequence[str | Path], schema: Schema) -> pd.DataFrame:
     """Several tables of one schema, read and checked, as one (sorted by the schema's key)."""
     parts = [read_table(p, schema) for p in paths]
     if not parts:

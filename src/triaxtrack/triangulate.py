@@ -27,6 +27,7 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass, fields, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -460,7 +461,7 @@ def quality_report(rec: SpecimenReconstruction, labels: pd.DataFrame, membrane_i
             "median_sigma_mm": float(mem["sigma_mm"].median()) if len(mem) else float("nan"),
         })  # fmt: skip
     c = rec.cell
-    cell = {
+    cell: dict[str, Any] = {
         "outer_radius_mm": c.outer_radius,
         "inner_radius_mm": c.inner_radius,
         "wall_thickness_mm": c.outer_radius - c.inner_radius,

@@ -481,5 +481,7 @@ def measure_windows(
     g.flags.writeable = False  # as decoded frames are: one compiled kernel for both
     uv = np.ascontiguousarray(uv_px, np.float64).reshape(-1, 2)
     rad = np.ascontiguousarray(radius_px, np.float64).reshape(-1)
-    *values, code = _measure_all(g, uv, rad, float(ink_fraction), float(disc_margin_px))
-    return WindowMeasure(*values, _REASONS[code])
+    uv_out, area, mass, smass, spx, white, noise, code = _measure_all(
+        g, uv, rad, float(ink_fraction), float(disc_margin_px)
+    )
+    return WindowMeasure(uv_out, area, mass, smass, spx, white, noise, _REASONS[code])

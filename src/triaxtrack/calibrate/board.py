@@ -34,6 +34,12 @@ class BoardImage:
     object_mm: np.ndarray | None = None
     whole: bool = False
 
+    def found_corners(self) -> np.ndarray:
+        """``corners_px`` of a view in which the board was found (ValueError naming the image if not)."""
+        if self.corners_px is None:
+            raise ValueError(f"board image {self.image}: no board found, so no corners")
+        return self.corners_px
+
     @property
     def kind(self) -> str | None:
         """``whole``, ``partial``, or None (no board)."""
@@ -97,7 +103,10 @@ def find_whole_board(gray: np.ndarray, board: dict, image: SmoothedImage | None 
     refined by :func:`refine_view`; ``image``: the :func:`smooth_image` of ``gray`` if at hand):
     a BoardImage named '' with ``whole`` true, or without corners when the board is not found."""
     pattern = board_pattern(board)
-    found, corners = cv2.findChessboardCornersSB(gray, pattern, SB_FLAGS)
+    # flags 0: SB_FLAGS were passed as the third positional argument, which is OpenCV's
+    # ``corners`` output, and so never applied; applying them finds other boards and moves the
+    # corners by ~0.1 px (before refinement), a change of results left to its own commit
+    found, corners = cv2.findChessboardCornersSB(gray, pattern, flags=0)
     if not found or corners is None or len(corners) != pattern[0] * pattern[1]:
         return BoardImage("", None)
     corners = canonical_corner_order(gray, corners.reshape(-1, 2), pattern)
@@ -153,6 +162,8 @@ def _enough(view: BoardImage, square_mm: float) -> BoardImage:
     or spans fewer than ``PARTIAL_MIN_LINES`` rows or columns."""
     if view.corners_px is None or len(view.corners_px) < PARTIAL_MIN_CORNERS:
         return BoardImage(view.image, None)
+    if view.object_mm is None:
+        raise ValueError(f"board image {view.image}: corners without their object points")
     ij = grid_indices(view.object_mm, square_mm)
     if min(len(np.unique(ij[:, 0])), len(np.unique(ij[:, 1]))) < PARTIAL_MIN_LINES:
         return BoardImage(view.image, None)

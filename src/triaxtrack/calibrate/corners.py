@@ -104,9 +104,9 @@ def _gradient(image: SmoothedImage, uv: np.ndarray) -> np.ndarray:
     flat = uv.reshape(-1, 2).astype(np.float32)
     n = len(flat)
     rows = -(-n // 1024)
-    maps = np.zeros((rows * 1024, 2), np.float32)
-    maps[:n] = flat
-    maps = maps.reshape(rows, 1024, 2)
+    padded = np.zeros((rows * 1024, 2), np.float32)
+    padded[:n] = flat
+    maps = padded.reshape(rows, 1024, 2)
     out = []
     for grad in (image.grad_u, image.grad_v):
         at = cv2.remap(grad, maps[..., 0], maps[..., 1], cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)

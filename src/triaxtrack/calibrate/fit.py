@@ -34,11 +34,13 @@ def _fit(
     ``(rms_px, K, dist (all OpenCV returns), per-view rms_px)``."""
     flags = MODELS[model][0]
     obj = [_object_points(v, board).astype(np.float32) for v in views]
-    img = [v.corners_px.astype(np.float32).reshape(-1, 1, 2) for v in views]
+    img = [v.found_corners().astype(np.float32).reshape(-1, 1, 2) for v in views]
     K0, d0 = (None, None) if guess is None else (guess[0].copy(), guess[1].copy())
     if guess is not None:
         flags |= cv2.CALIB_USE_INTRINSIC_GUESS
-    out = cv2.calibrateCameraExtended(obj, img, size, K0, d0, flags=flags, criteria=CALIBRATE_CRITERIA)
+    # (OpenCV takes None for K and dist without a guess, as outputs only; its stub leaves None out)
+    out = cv2.calibrateCameraExtended(obj, img, size, K0, d0,  # type: ignore[arg-type]
+                                      flags=flags, criteria=CALIBRATE_CRITERIA)  # fmt: skip
     rms, K, dist, per_view = out[0], out[1], out[2], out[7]
     return float(rms), K, dist.ravel().copy(), per_view.ravel().astype(np.float64)
 
@@ -207,7 +209,7 @@ def calibrate_views(
         "n_images": len(found),
         "n_images_found": len(usable),
         "n_images_used": len(used),
-        "n_corners_used": int(sum(len(b.corners_px) for b in used)),
+        "n_corners_used": int(sum(len(b.found_corners()) for b in used)),
         "outlier_limit_px": float(limit),
         "images": _image_records(found, used_rms, reason, board, K, dist),
         "board": {k: board[k] for k in ("squares_x", "squares_y", "square_mm")},

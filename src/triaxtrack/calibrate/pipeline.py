@@ -28,13 +28,12 @@ def detect_boards(
     """
     if not image_paths:
         raise CalibrationError(f"camera {camera}: no board images given")
-    size = None
+    size, first = (0, 0), image_paths[0]  # (the first image's size, set at k = 0)
     found = []
-    for path in image_paths:
+    for k, path in enumerate(image_paths):
         gray = _read_gray(camera, path)
-        if size is None:
+        if k == 0:
             size = (gray.shape[1], gray.shape[0])
-            first = path
         elif (gray.shape[1], gray.shape[0]) != size:
             raise CalibrationError(
                 f"camera {camera}: board image {path} is {gray.shape[1]}x{gray.shape[0]} px, "

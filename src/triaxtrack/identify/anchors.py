@@ -25,6 +25,13 @@ class _Anchor:
     top: tuple[np.ndarray, np.ndarray] | None  # (centre, ellipse map) of the top CT
     bottom: tuple[np.ndarray, np.ndarray] | None
 
+    def first_ct(self) -> tuple[np.ndarray, np.ndarray]:
+        """The (centre, ellipse map) of the top CT, or of the bottom one when it alone was decoded."""
+        ct = self.top if self.top is not None else self.bottom
+        if ct is None:
+            raise ValueError(f"the pedestal anchor of column {self.C} has no decoded CT")
+        return ct
+
 
 def _pedestal_anchors(centres: dict, design: dict) -> list[_Anchor]:
     """Pairs first (the paper's method), then single CTs whose partner was not decoded."""
@@ -109,7 +116,7 @@ def _anchor_down(
     indices (row, column) at ``xy`` (N, 2) undistorted pixels); None with fewer than 3 such steps."""
     ends = [e for e in (an.top, an.bottom) if e is not None]
     if len(ends) == 2:
-        down = an.bottom[0] - an.top[0]
+        down = ends[1][0] - ends[0][0]  # bottom - top
         down /= np.linalg.norm(down)
         return down
     near = np.argsort(np.linalg.norm(xy - ends[0][0], axis=1))[:30]
@@ -263,7 +270,7 @@ def _membrane_region_offsets(grid, phase, anchors, pos, design, p, ctx):
         return "larger membrane dots not distinguishable"
     nodes = np.array(list(grid.keys()))
     xy = pos[np.fromiter(grid.values(), int)]
-    offsets = {}
+    offsets: dict[tuple[int, int], list[_Anchor]] = {}
     for an in anchors:
         off = _anchor_offsets(an, grid, nodes, xy, phase, pos, design, p, ctx)
         if off is not None:

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pandas as pd
@@ -39,6 +40,9 @@ from triaxtrack.identify.merged import _recentred_beside_edge, _split_merged_pai
 from triaxtrack.identify.state import LABEL_COLUMNS, NOT_REACHED, UNLABELLED, IdentifyParams, _Frame
 from triaxtrack.kit import ct_codes, load_kit_design, target_table
 from triaxtrack.tables import FRAME_MAP, LABELS, concat_tables, read_table, write_table
+
+if TYPE_CHECKING:
+    from triaxtrack.optics import Camera
 
 # a membrane dot beside a dark edge this much less round than its grid neighbours (seen at the
 # same angle) has merged with the edge's fringe: on the demo one at 0.52 was 1.4 px off; 0.45 %
@@ -278,7 +282,7 @@ def identify(
     return _label_table(f, cts, candidates, uv, split)
 
 
-def undistorted_pixels(camera) -> callable:
+def undistorted_pixels(camera: Camera) -> Callable[[np.ndarray], np.ndarray]:
     """(N, 2) distorted pixels -> undistorted pixels of ``camera`` (NaN where not invertible)."""
     from functools import partial
 

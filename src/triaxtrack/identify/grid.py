@@ -102,13 +102,14 @@ def grow_chain(
         for i in range(n):
             if i in labels:
                 continue
-            pred = spacing = None
+            pred: np.ndarray | None = None
+            spacing = 0.0  # the dot spacing there, pixels (set with pred)
             lo = next((j for j in range(i - 1, i - max_bracket, -1) if has(j)), None)
             hi = next((k for k in range(i + 1, i + max_bracket) if has(k)), None)
             if lo is not None and hi is not None:
                 f = (i - lo) / (hi - lo)
                 pred = p(lo) + f * (p(hi) - p(lo))
-                spacing = np.linalg.norm(p(hi) - p(lo)) / (hi - lo)
+                spacing = float(np.linalg.norm(p(hi) - p(lo))) / (hi - lo)
             else:
                 for s in (1, -1):
                     a = i - s
@@ -120,10 +121,10 @@ def grow_chain(
                             pred = p(a) + d + (d - (p(a - s) - p(a - 2 * s)))
                         else:
                             pred = p(a) + d
-                        spacing = np.linalg.norm(d)
+                        spacing = float(np.linalg.norm(d))
                     elif (s == 1 and key(a) in hint) or (s == -1 and key(i) in hint):
                         d = hint[key(a)] if s == 1 else -hint[key(i)]
-                        pred, spacing = p(a) + d, np.linalg.norm(d)
+                        pred, spacing = p(a) + d, float(np.linalg.norm(d))
                     if pred is not None:
                         break
             if pred is None:
@@ -168,7 +169,8 @@ def grow_grid(pool: _Pool, seed: dict[tuple[int, int], int], gate: float) -> dic
             support = sum((i + di, j + dj) in labels for di in (-1, 0, 1) for dj in (-1, 0, 1))
             if support < MIN_SUPPORT - 1:
                 continue  # never grow a spur: a node needs two labelled neighbours at least
-            preds, steps = [], []
+            preds: list[np.ndarray] = []
+            steps: list[np.floating] = []
             across = False  # a straight continuation whose spacing across was measured
             for di, dj in NEIGHBOURS:
                 a, b = (i + di, j + dj), (i + 2 * di, j + 2 * dj)
@@ -198,10 +200,10 @@ def grow_grid(pool: _Pool, seed: dict[tuple[int, int], int], gate: float) -> dic
                         )
             if not preds or (support < MIN_SUPPORT and not across):
                 continue
-            preds = np.asarray(preds)
-            pred = np.median(preds, axis=0)
+            candidates = np.asarray(preds)
+            pred = np.median(candidates, axis=0)
             radius = gate * min(steps)
-            if np.max(np.linalg.norm(preds - pred, axis=1)) > radius:
+            if np.max(np.linalg.norm(candidates - pred, axis=1)) > radius:
                 continue
             k = pool.unique_within(pred, radius)
             if k < 0:

@@ -58,7 +58,7 @@ def _label_membrane(f: _Frame, pool: _Pool, centres: dict, design: dict, p: Iden
             down /= np.linalg.norm(down)
             start_at = 0.5 * (an.top[0] + an.bottom[0])
         else:
-            centre, mp = an.top or an.bottom
+            centre, mp = an.first_ct()
             sign = 1.0 if an.top is not None else -1.0
             down = axis
             # a point on the membrane a quarter of its height from the CT's pedestal face

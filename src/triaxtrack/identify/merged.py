@@ -41,13 +41,13 @@ def _recentred_beside_edge(
             sel.append(k)
             prev.append(a)
             nxt.append(b)
-    sel = np.asarray(sel, int)
-    if not len(sel):
-        return sel, np.zeros((0, 2))
-    minor = f.blobs.minor_px.to_numpy()[sel]
-    new = gap_background_centroids(gray, uv[sel], uv[prev], uv[nxt], 0.5 * minor + GAP_ACROSS_PX)
+    at = np.asarray(sel, int)
+    if not len(at):
+        return at, np.zeros((0, 2))
+    minor = f.blobs.minor_px.to_numpy()[at]
+    new = gap_background_centroids(gray, uv[at], uv[prev], uv[nxt], 0.5 * minor + GAP_ACROSS_PX)
     ok = np.isfinite(new).all(axis=1)
-    return sel[ok], new[ok]
+    return at[ok], new[ok]
 
 
 def _split_merged_pairs(
@@ -71,21 +71,29 @@ def _split_merged_pairs(
     tree = cKDTree(uv)
     area = f.blobs.area_px.to_numpy()
     white = f.blobs.background.to_numpy()
-    quads = []
+    quads: list[tuple[int, int, int, int]] = []  # blob of U, IDs of A and B, blob of D
     for dr, dc in ((1, 0), (0, 1)):
         a, b, d = (_grid_neighbour(labelled, m, j * dr, j * dc) for j in (1, 2, 3))
         ok = (a > 0) & (b > 0) & ~np.isin(a, labelled) & ~np.isin(b, labelled) & np.isin(d, labelled)
         quads += zip(member[ok], a[ok], b[ok], blob_of.reindex(d[ok]).to_numpy(), strict=True)
-    rows, taken, split = [], set(), set()
-    for ku, a, b, kd in sorted(quads, key=lambda q: (f.ids[q[0]], q[2] - q[1])):
+    rows: list[dict] = []
+    taken: set[int] = set()
+    split: set[int] = set()
+    for ku, id_a, id_b, kd in sorted(quads, key=lambda q: (f.ids[q[0]], q[2] - q[1])):
         step = (uv[kd] - uv[ku]) / 3
         gate = p.gate * np.linalg.norm(step)
         dist, k = tree.query(uv[ku] + 1.5 * step)
-        if {a, b} & taken or k in split or dist > gate or not free[k] or area[k] <= max(area[ku], area[kd]):
+        if (
+            {id_a, id_b} & taken
+            or k in split
+            or dist > gate
+            or not free[k]
+            or area[k] <= max(area[ku], area[kd])
+        ):
             continue
         expected = np.array([uv[ku] + step, uv[ku] + 2 * step])
         centres, (ha, hb, rms, roundness) = merged_pair_centroids(
-            gray, *expected, white[k], uv[[ku, kd]], detect_params
+            gray, expected[0], expected[1], white[k], uv[[ku, kd]], detect_params
         )
         if not (
             np.isfinite(centres).all()
@@ -95,10 +103,10 @@ def _split_merged_pairs(
             and rms <= MERGED_FIT_RMS
         ):
             continue
-        taken |= {int(a), int(b)}
+        taken |= {int(id_a), int(id_b)}
         split.add(k)
-        f.reason[k] = f"two dots merged, fitted apart as {a} and {b}"
-        for tid, c in zip((a, b), centres, strict=True):
+        f.reason[k] = f"two dots merged, fitted apart as {id_a} and {id_b}"
+        for tid, c in zip((id_a, id_b), centres, strict=True):
             rows.append({"id": int(tid), "kind": "dot", "group": f.group[ku], "u_px": c[0], "v_px": c[1],
                          "area_px": area[k] / 2, "roundness": roundness, "quality": MERGED_QUALITY,
                          "reason": ""})  # fmt: skip

@@ -184,7 +184,8 @@ def draw_bars(
         top += v
     subs = list(sublabels) if sublabels is not None else [""] * len(labels)
     ticks = [f"{lab}\n{s}" if s else str(lab) for lab, s in zip(labels, subs, strict=True)]
-    slot_px = ax.figure.get_figwidth() * ax.figure.dpi * 0.8 / len(labels)
+    root = ax.figure.figure  # the figure itself (or, were ax in a subfigure, the whole one)
+    slot_px = root.get_figwidth() * root.dpi * 0.8 / len(labels)
     upright = max(len(str(lab)) for lab in labels) * TICK_CHAR_PX > slot_px
     ax.set_xticks(x, ticks, rotation=90 if upright else 0)
     ax.set_xlim(-0.6, len(labels) - 0.4)

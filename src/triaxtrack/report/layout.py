@@ -11,6 +11,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from triaxtrack.kit import membrane_radius, target_table
 
@@ -84,8 +85,8 @@ class MembraneLayout:
     def cell_corners(self) -> np.ndarray:
         """(n_cells, 4) flat grid indices of each cell's corner dots, in order around the quad,
         cells in :meth:`cell_index` order; the last column's cell closes the ring on column 1."""
-        r, c = np.meshgrid(np.arange(self.rows - 1), np.arange(self.columns), indexing="ij")
-        r, c = r.ravel(), c.ravel()
+        rr, cc = np.meshgrid(np.arange(self.rows - 1), np.arange(self.columns), indexing="ij")
+        r, c = rr.ravel(), cc.ravel()
         c1 = (c + 1) % self.columns
         n = self.columns
         return np.column_stack([r * n + c, r * n + c1, (r + 1) * n + c1, (r + 1) * n + c])
@@ -96,21 +97,21 @@ class MembraneLayout:
         deg = np.rad2deg(self.col_theta_rad)
         return np.append(deg, deg[0] + 360.0)
 
-    def column_of_theta(self, theta_deg: np.ndarray) -> np.ndarray:
+    def column_of_theta(self, theta_deg: ArrayLike) -> np.ndarray:
         """The (fractional) column number at design theta (deg): column c is at its dots."""
         deg = np.rad2deg(self.col_theta_rad)
         return (np.asarray(theta_deg, float) - deg[0]) / 360.0 * self.columns + 1.0
 
-    def theta_of_column(self, col: np.ndarray) -> np.ndarray:
+    def theta_of_column(self, col: ArrayLike) -> np.ndarray:
         deg = np.rad2deg(self.col_theta_rad)
         return (np.asarray(col, float) - 1.0) * 360.0 / self.columns + deg[0]
 
-    def row_of_z(self, z_mm: np.ndarray) -> np.ndarray:
+    def row_of_z(self, z_mm: ArrayLike) -> np.ndarray:
         """The (fractional) row number at design z (mm), linear through the rows' z."""
         z0, z1 = float(self.row_z_mm[0]), float(self.row_z_mm[-1])
         return 1.0 + (np.asarray(z_mm, float) - z0) / (z1 - z0) * (self.rows - 1)
 
-    def z_of_row(self, row: np.ndarray) -> np.ndarray:
+    def z_of_row(self, row: ArrayLike) -> np.ndarray:
         z0, z1 = float(self.row_z_mm[0]), float(self.row_z_mm[-1])
         return z0 + (np.asarray(row, float) - 1.0) / (self.rows - 1) * (z1 - z0)
 

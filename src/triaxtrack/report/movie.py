@@ -16,6 +16,7 @@ from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from fractions import Fraction
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import av
 import cv2
@@ -30,6 +31,10 @@ from triaxtrack.report.layout import MembraneLayout, membrane_layout
 from triaxtrack.report.style import DIVERGING_CMAP, MISSING, figure_image, new_figure, styled
 from triaxtrack.tables import POINTS, STRAINS, read_table
 from triaxtrack.video.write import CODECS, ENCODER_THREADS
+
+if TYPE_CHECKING:
+    from av.container import OutputContainer
+    from av.video.stream import VideoStream
 
 __all__ = ["DIVERGING", "specimen_frames", "write_movie", "write_movie_page"]
 
@@ -180,12 +185,14 @@ def _scene(
     centre = xyz[(mem["frame"] == mem["frame"].min()).to_numpy(), :2].mean(axis=0)  # the axis
     radial = np.hypot(*(xyz[:, :2] - centre).T) - np.hypot(*(ref_xyz[:, :2] - centre).T)
     others_drawn = _displaced(others, magnify)[2]
-    if colour_by == "radial":
+    if colour_by == "radial" or strains is None:  # (strains is None only with "radial": checked above)
         vmax = half_range(radial) if vmax is None else vmax
         unit, factor = "radial displacement (mm)", 1.0
+        strain_frames = {}
     else:
         vmax = half_range(strains[colour_by].to_numpy(float)) if vmax is None else vmax
         unit, factor = f"{colour_by} (%)", 100.0
+        strain_frames = dict(tuple(strains.groupby("frame")))
     vmax = max(float(vmax), MIN_RANGE)
     stage = _stage(np.vstack([drawn, others_drawn]), centre, height)
     bar = _colour_bar(height, vmax, unit, factor)
@@ -194,7 +201,7 @@ def _scene(
         layout=layout, corners=layout.cell_corners(), drawn=drawn, radial=radial,
         grid_idx=layout.grid_index(mem["id"].to_numpy()), centre=centre, mem_frames=_rows_by_frame(mem),
         other_frames={f: others_drawn[k] for f, k in _rows_by_frame(others).items()},
-        strain_frames=dict(tuple(strains.groupby("frame"))) if colour_by != "radial" else {},
+        strain_frames=strain_frames,
         times=pts.groupby("frame")["time_s"].first(), stage=stage, bar=bar, width=width + width % 2,
         height=height, views_deg=tuple(views_deg), colour_by=colour_by, vmax=vmax, magnify=magnify,
     )  # fmt: skip
@@ -319,7 +326,9 @@ def _draw_view(
     _text(img, f"seen from azimuth {azimuth_deg:g} deg", (cx, img.shape[0] - 8), SMALL, AXIS, align="centre")
 
 
-def _open_stream(path: Path, shape: tuple[int, ...], rate: Fraction, crf: int, preset: str) -> tuple:
+def _open_stream(
+    path: Path, shape: tuple[int, ...], rate: Fraction, crf: int, preset: str
+) -> tuple[OutputContainer, VideoStream]:
     """An H.264 MP4 container and stream at ``path`` for frames of ``shape`` (odd sizes padded)."""
     h, w = shape[0] + shape[0] % 2, shape[1] + shape[1] % 2
     container = av.open(str(path), mode="w", options={"movflags": "+faststart"})
@@ -350,7 +359,7 @@ def write_movie(
     if rate <= 0:
         raise ValueError(f"fps must be > 0, got {fps}")
     path = Path(path)
-    container = stream = None
+    opened: tuple[OutputContainer, VideoStream] | None = None
     shape: tuple[int, ...] | None = None
     n = 0
     try:
@@ -359,11 +368,12 @@ def write_movie(
                 raise ValueError(
                     f"{path}: frames must be (H, W, 3) uint8 BGR, got {frame.dtype} {frame.shape}"
                 )
-            if shape is None:
+            if opened is None:
                 shape = frame.shape
-                container, stream = _open_stream(path, shape, rate, crf, preset)
+                opened = _open_stream(path, shape, rate, crf, preset)
             elif frame.shape != shape:
                 raise ValueError(f"{path}: frame {n} has shape {frame.shape}, the first {shape}")
+            container, stream = opened
             pad_h, pad_w = stream.height - frame.shape[0], stream.width - frame.shape[1]
             if pad_h or pad_w:
                 frame = cv2.copyMakeBorder(frame, 0, pad_h, 0, pad_w, cv2.BORDER_CONSTANT, value=WHITE)
@@ -374,13 +384,14 @@ def write_movie(
             for packet in stream.encode(vf):
                 container.mux(packet)
             n += 1
-        if stream is None:
+        if opened is None:
             raise ValueError(f"{path}: no frames to encode")
+        container, stream = opened
         for packet in stream.encode(None):
             container.mux(packet)
     finally:
-        if container is not None:
-            container.close()
+        if opened is not None:
+            opened[0].close()
     return n
 
 

@@ -8,14 +8,17 @@ import contextlib
 import functools
 from collections.abc import Callable
 from pathlib import Path
-from typing import ParamSpec, TypeVar
+from typing import TYPE_CHECKING, Any, Literal, ParamSpec, TypeVar, cast
 
 import matplotlib as mpl
 import numpy as np
 from matplotlib.axes import Axes
 from matplotlib.backends.backend_agg import FigureCanvasAgg
-from matplotlib.colors import Colormap, to_hex
+from matplotlib.colors import Colormap, ListedColormap, to_hex
 from matplotlib.figure import Figure
+
+if TYPE_CHECKING:
+    from matplotlib.typing import RcKeyType
 
 __all__ = [
     "DIVERGING_CMAP",
@@ -32,12 +35,14 @@ __all__ = [
 
 DPI = 100  # figure sizes are given in pixels; 100 px per inch keeps the fonts' point sizes readable
 #: Tableau-10: distinguishable series colours (matplotlib's default cycle)
-PALETTE: tuple[str, ...] = tuple(to_hex(c) for c in mpl.colormaps["tab10"].colors)
+PALETTE: tuple[str, ...] = tuple(
+    to_hex(c) for c in np.asarray(cast(ListedColormap, mpl.colormaps["tab10"]).colors)
+)
 MISSING = "#c8c8c8"  # cells without a value
 #: Signed quantities: blue negative, light grey zero, red positive (Moreland's cool-warm), NaN grey
 DIVERGING_CMAP: Colormap = mpl.colormaps["coolwarm"].with_extremes(bad=MISSING)
 
-STYLE = {
+STYLE: dict[RcKeyType, Any] = {
     "font.size": 9.0,
     "axes.titlesize": 9.5,
     "axes.labelsize": 9.0,
@@ -74,7 +79,9 @@ def styled(draw: Callable[P, R]) -> Callable[P, R]:
     return wrapper
 
 
-def new_figure(width_px: int, height_px: int, layout: str | None = "constrained") -> Figure:
+def new_figure(
+    width_px: int, height_px: int, layout: Literal["constrained", "compressed"] | None = "constrained"
+) -> Figure:
     """An empty white figure of ``width_px`` x ``height_px`` pixels attached to an Agg canvas
     (not to pyplot). ``layout``: matplotlib's layout engine ("constrained"; "compressed" for
     grids of fixed-aspect axes; None: axes placed by hand)."""

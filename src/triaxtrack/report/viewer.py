@@ -5,6 +5,7 @@ stage, from a test's files to the page (:func:`run_specimen_viewer`)."""
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -22,8 +23,8 @@ def _triangles(n_r: int, n_c: int) -> np.ndarray:
 
 
 def viewer_html(
-    frames: list[MembraneFrame], colour_by: str = "e_zz", title: str = "specimen",
-    skipped: list[tuple[int, str]] = (),
+    frames: Sequence[MembraneFrame], colour_by: str = "e_zz", title: str = "specimen",
+    skipped: Sequence[tuple[int, str]] = (),
 ) -> str:  # fmt: skip
     """The page: a plotly Mesh3d of each frame's membrane surface (mm, cell frame), coloured by
     ``colour_by`` (Green-Lagrange, tension positive, %, a diverging scale symmetric about 0),

@@ -3,6 +3,7 @@ observations and points gathered from the rendered chunks."""
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -18,8 +19,8 @@ def truth_volume(cfg: SimulationConfig, deformation: Deformation) -> pd.DataFram
     """Exact soil volume and strains at every frame."""
     frames = np.arange(cfg.frames)
     v0 = deformation.soil_volume(0.0)
-    vol = np.array([deformation.soil_volume(frame_progress(k, cfg)) for k in frames])
-    h = np.array([deformation.current_height(frame_progress(k, cfg)) for k in frames])
+    vol = np.array([deformation.soil_volume(frame_progress(k, cfg)) for k in range(cfg.frames)])
+    h = np.array([deformation.current_height(frame_progress(k, cfg)) for k in range(cfg.frames)])
     return pd.DataFrame({
         "frame": frames.astype(np.int64),
         "time_s": frames / cfg.fps,
@@ -41,7 +42,7 @@ def target_positions(scene: Scene, frame: int) -> pd.DataFrame:
     return pd.DataFrame({"id": t["id"].to_numpy(), "x_mm": xyz[:, 0], "y_mm": xyz[:, 1], "z_mm": xyz[:, 2]})
 
 
-def finish_truth(test_dir: str | Path, observation_parts: list[str | Path]) -> None:
+def finish_truth(test_dir: str | Path, observation_parts: Sequence[str | Path]) -> None:
     """Gather the per-chunk observations into ``truth/observations.parquet`` and write
     ``truth/points.parquet`` (every target at every frame, ``n_rays`` = cameras that see it)."""
     test_dir = Path(test_dir)

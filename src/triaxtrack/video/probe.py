@@ -6,6 +6,7 @@ against its own index by demuxing every packet (no decoding)."""
 from __future__ import annotations
 
 import os
+from collections.abc import Mapping
 from fractions import Fraction
 from pathlib import Path
 from typing import Any
@@ -127,14 +128,14 @@ def probe_video(path: PathLike, *, index_only: bool = False) -> dict[str, Any]:
         fps = _stream_fps(stream, p)
         index_frames = int(stream.frames or 0) or None
         try:
-            counts = (
+            counts: Mapping[str, int | None] = (
                 dict(packets=index_frames, keyframes=None, without_pts=None, partial=0)
                 if index_only and index_frames
                 else _count_packets(container, stream)
             )
         except av.FFmpegError as exc:
             raise ValueError(f"cannot read video {p}: {exc}") from exc
-        frames = counts["packets"]
+        frames = int(counts["packets"] or 0)  # (an int in both branches)
         if index_frames is not None and frames < index_frames:
             damage = _mp4_damage(p) or f"it has {p.stat().st_size} bytes"
             partial = " (and part of one more)" if counts["partial"] else ""

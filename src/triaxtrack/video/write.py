@@ -20,7 +20,7 @@ from collections.abc import Iterable
 from fractions import Fraction
 from pathlib import Path
 from types import TracebackType
-from typing import Any
+from typing import Any, Literal
 
 import av
 import numpy as np
@@ -28,7 +28,7 @@ import numpy as np
 from triaxtrack.video.probe import _AVCOL_RANGE_JPEG, PathLike
 
 #: Public codec names accepted by the writers, mapped to the FFmpeg encoder used.
-CODECS: dict[str, str] = {"h264": "libx264", "h265": "libx265"}
+CODECS: dict[str, Literal["libx264", "libx265"]] = {"h264": "libx264", "h265": "libx265"}
 
 #: Default maximum keyframe interval, in frames. Random access (``iter_frames(start=...)``)
 #: decodes at most this many frames before the first requested one.

@@ -49,8 +49,9 @@ class MembraneGrid:
         return int((~self.measured).sum())
 
 
-def _membrane_layout(table: pd.DataFrame) -> tuple[pd.DataFrame, np.ndarray, np.ndarray]:
-    """Membrane rows of the design table with grid indices ``i, j`` added; design z and theta."""
+def _membrane_layout(table: pd.DataFrame) -> tuple[pd.DataFrame, pd.Series, pd.Series]:
+    """Membrane rows of the design table with grid indices ``i, j`` added; design z (mm) by
+    row and theta (rad) by column, as Series indexed by the kit's row and column numbers."""
     mem = table.loc[table["surface"] == "membrane", ["id", "theta_rad", "z_mm", "row", "col"]].copy()
     if mem.empty:
         raise ValueError("the target table has no membrane dots")

@@ -102,7 +102,7 @@ class _Surface:
         if np.ndim(thickness) == 0:
             t_const = float(thickness)
         else:
-            thick = _node_field(grid, thickness, zg, theta_q)
+            thick = _node_field(grid, np.asarray(thickness), zg, theta_q)
         return _Surface(theta_q, _ColumnSplines(zg, x_q), _ColumnSplines(zg, xt_q), thick, t_const)
 
     def area(self, zq: np.ndarray) -> np.ndarray:
