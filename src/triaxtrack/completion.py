@@ -28,6 +28,7 @@ tracker's checks) the shorter fitted step of the grid there. Pixels in OpenCV's 
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import NamedTuple
 
 import numba
@@ -297,24 +298,8 @@ def complete_grid(
             break
         meas = measure(gray, pred[k], rad[k])
         measured[which[k]] = True
-        ok = (meas.reason == "") & (np.linalg.norm(meas.uv - pred[k], axis=1) <= gate * near[k])
-        if len(known) and ok.any():  # not on a reported target (nor one taken on this round)
-            d, _ = nearest_within(known, np.nan_to_num(meas.uv), min_separation * near[k])
-            ok &= d >= min_separation * near[k]
-        with np.errstate(invalid="ignore", divide="ignore"):
-            ok &= np.abs(np.log(meas.mass / typical)) <= np.log(MASS_RATIO)
-            # beyond two columns: its own column step (from the dot beside it in its row) shows
-            # how obliquely it is seen (the fitted step is the columns' behind it), and it is not
-            # its row's last dot (at a silhouette, that one takes in the dark edge's fringe, and
-            # the cell's lens may stretch the columns there: their step does not show it)
-            own = np.linalg.norm(meas.uv - beside[k, :2], axis=1) / beside[k, 2]
-            ok &= ~(own < MIN_VIEW_COS * aspect)
-        good = np.nonzero(ok & np.isfinite(beside[k, 0]))[0]  # the others need no probe
-        if len(good):
-            sub = WindowMeasure(*(a[good] for a in meas))
-            ok[good] = _row_goes_on(
-                gray, measure, sub, beside[k[good], :2], rad[k[good]], typical, gate, cell_uv
-            )
+        ok = _passes(gray, measure, meas, pred[k], near[k], beside[k], rad[k], known, typical,
+                     gate=gate, min_separation=min_separation, aspect=aspect, cell_uv=cell_uv)  # fmt: skip
         if not ok.any() or grid_ids is None:
             break
         new = which[k[ok]]
@@ -325,11 +310,7 @@ def complete_grid(
         index[row[new], col[new]] = len(at) + np.arange(len(new))
         at, rad_of = np.r_[at, meas.uv[ok]], np.r_[rad_of, rad[k[ok]]]
         known = np.r_[known, meas.uv[ok]]
-        placed = np.zeros(index.shape, bool)
-        placed[row[new], col[new]] = True
-        listed = np.zeros(index.shape, bool)
-        listed[row, col] = True
-        er, ec = np.nonzero((_near_count(placed) > 0) & (index < 0) & ~listed & _inner(index.shape))
+        er, ec = _joining(index, row, col, new)
         ids, row, col = np.r_[ids, grid_ids[er, ec]], np.r_[row, er], np.r_[col, ec]
         streak0 = np.r_[streak0, np.zeros(len(er), np.int64)]
         passed, measured = np.r_[passed, np.zeros(len(er), bool)], np.r_[measured, np.zeros(len(er), bool)]
@@ -338,6 +319,59 @@ def complete_grid(
     found = _found(ids, sel, parts)
     keep = ~sel & ((np.arange(len(ids)) < len(cand.ids)) | passed)  # a new dot stays if it passed
     return Candidates(ids[keep], row[keep], col[keep], streak[keep]), found
+
+
+def _passes(
+    gray: np.ndarray,
+    measure: Callable[[np.ndarray, np.ndarray, np.ndarray], WindowMeasure],
+    meas: WindowMeasure,
+    pred: np.ndarray,
+    near: np.ndarray,
+    beside: np.ndarray,
+    rad: np.ndarray,
+    known: np.ndarray,
+    typical: float,
+    *,
+    gate: float,
+    min_separation: float,
+    aspect: float,
+    cell_uv: np.ndarray | None,
+) -> np.ndarray:
+    """(k,) bool: which of k candidates measured at ``meas`` (predicted at ``pred`` (k, 2),
+    grid spacing ``near`` (k,), the dot beside each in its row ``beside`` (k, 3: u, v, its
+    step), radius ``rad`` (k,)) pass: found near the prediction, not on a ``known`` target,
+    of the ``typical`` mass, not seen too obliquely, and, beside a dot, their row goes on
+    (:func:`_row_goes_on`). Arguments as :func:`complete_grid`'s."""
+    ok = (meas.reason == "") & (np.linalg.norm(meas.uv - pred, axis=1) <= gate * near)
+    if len(known) and ok.any():  # not on a reported target (nor one taken on this round)
+        d, _ = nearest_within(known, np.nan_to_num(meas.uv), min_separation * near)
+        ok &= d >= min_separation * near
+    with np.errstate(invalid="ignore", divide="ignore"):
+        ok &= np.abs(np.log(meas.mass / typical)) <= np.log(MASS_RATIO)
+        # beyond two columns: its own column step (from the dot beside it in its row) shows
+        # how obliquely it is seen (the fitted step is the columns' behind it), and it is not
+        # its row's last dot (at a silhouette, that one takes in the dark edge's fringe, and
+        # the cell's lens may stretch the columns there: their step does not show it)
+        own = np.linalg.norm(meas.uv - beside[:, :2], axis=1) / beside[:, 2]
+        ok &= ~(own < MIN_VIEW_COS * aspect)
+    good = np.nonzero(ok & np.isfinite(beside[:, 0]))[0]  # the others need no probe
+    if len(good):
+        sub = WindowMeasure(*(a[good] for a in meas))
+        ok[good] = _row_goes_on(gray, measure, sub, beside[good, :2], rad[good], typical, gate, cell_uv)
+    return ok
+
+
+def _joining(
+    index: np.ndarray, row: np.ndarray, col: np.ndarray, new: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """(rows, columns) of the grid's inner cells beside the candidates ``new`` just placed
+    (``row``, ``col``: every candidate's) that hold neither a dot (``index`` < 0) nor a candidate."""
+    placed = np.zeros(index.shape, bool)
+    placed[row[new], col[new]] = True
+    listed = np.zeros(index.shape, bool)
+    listed[row, col] = True
+    er, ec = np.nonzero((_near_count(placed) > 0) & (index < 0) & ~listed & _inner(index.shape))
+    return er, ec
 
 
 def _found(ids: np.ndarray, sel: np.ndarray, parts: list) -> Found:
