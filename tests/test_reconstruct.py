@@ -12,20 +12,12 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from triaxtrack.cell_frame import axis_frame, fit_cylinder, similarity_transform, transform_points
 from triaxtrack.kit import design_points
 from triaxtrack.optics import Camera, cell_optics, project_air, project_water
 from triaxtrack.refractive_pose import PoseObservations, image_spread_px, min_spread_px, pose_camera
-from triaxtrack.score import rotation_angle_deg
-from triaxtrack.sfm import (
-    SfmConfig,
-    axis_frame,
-    bundle_adjust,
-    cell_summary,
-    fit_cylinder,
-    reconstruct_cell,
-    similarity_transform,
-    transform_points,
-)
+from triaxtrack.score_cameras import rotation_angle_deg
+from triaxtrack.sfm import SfmConfig, bundle_adjust, cell_summary, reconstruct_cell
 from triaxtrack.simulate import SimulationConfig, make_cameras
 from triaxtrack.triangulate import (
     TriangulationConfig,

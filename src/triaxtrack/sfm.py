@@ -10,9 +10,10 @@ no feature matching:
    (:func:`bundle_adjust`); observations whose residual exceeds ``max_residual_px`` are
    dropped and the adjustment is run again;
 3. the scale and the frame from the design: the similarity that best maps the adjusted targets
-   onto their design positions (:func:`similarity_transform`);
-4. the cell's outer cylinder fitted to the 3-D targets (:func:`fit_cylinder`), and every camera
-   and point moved so that its axis is the z axis (:func:`axis_frame`): the frame in which
+   onto their design positions (:func:`~triaxtrack.cell_frame.similarity_transform`);
+4. the cell's outer cylinder fitted to the 3-D targets
+   (:func:`~triaxtrack.cell_frame.fit_cylinder`), and every camera and point moved so that its
+   axis is the z axis (:func:`~triaxtrack.cell_frame.axis_frame`): the frame in which
    :mod:`triaxtrack.optics` traces rays through the wall.
 
 A camera that labels too few cell-wall targets is posed from the targets in the water instead
@@ -35,11 +36,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field, fields, replace
 
-import cv2
 import numpy as np
 import pandas as pd
-from scipy.optimize import least_squares
 
+from triaxtrack.cell_frame import Cylinder, axis_frame, fit_cylinder, similarity_transform, transform_points
 from triaxtrack.eccentricity import observation_eccentricity
 from triaxtrack.optics import Camera, CellOptics, project_air
 from triaxtrack.refractive_pose import PoseObservations, pnp_pose, pose_camera
@@ -85,16 +85,6 @@ class SfmConfig:
     def from_dict(d: dict | None) -> SfmConfig:
         known = {f.name for f in fields(SfmConfig)}
         return SfmConfig(**{k: v for k, v in (d or {}).items() if k in known})
-
-
-@dataclass(frozen=True)
-class Cylinder:
-    """A fitted cylinder: a point on its axis and the axis direction (unit), mm."""
-
-    point: np.ndarray  # (3,)
-    direction: np.ndarray  # (3,)
-    radius: float
-    rms_mm: float  # RMS distance of the points from the surface
 
 
 @dataclass(frozen=True)
@@ -244,73 +234,6 @@ def reprojection_residuals(
         du[sel] = uv[:, 0] - obs["u_px"].to_numpy()[known]
         dv[sel] = uv[:, 1] - obs["v_px"].to_numpy()[known]
     return observations.assign(du_px=du, dv_px=dv)
-
-
-def similarity_transform(src: np.ndarray, dst: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
-    """Least-squares similarity ``dst ~ s A src + b`` of two (N, 3) point sets (Umeyama 1991).
-    Returns ``(s, A, b)``, ``A`` a proper rotation."""
-    ms, md = src.mean(axis=0), dst.mean(axis=0)
-    a, b = src - ms, dst - md
-    U, S, Vt = np.linalg.svd(b.T @ a / len(src))
-    D = np.eye(3)
-    D[2, 2] = np.sign(np.linalg.det(U @ Vt))
-    A = U @ D @ Vt
-    s = float(np.trace(np.diag(S) @ D) / (a**2).sum(axis=1).mean())
-    return s, A, md - s * A @ ms
-
-
-def transform_points(
-    points: pd.DataFrame, scale: float, rotation: np.ndarray, translation: np.ndarray
-) -> pd.DataFrame:
-    """A copy of ``points`` (columns ``x_mm, y_mm, z_mm``) moved by ``x' = s A x + b``."""
-    xyz = points[["x_mm", "y_mm", "z_mm"]].to_numpy(float)
-    new = scale * xyz @ np.asarray(rotation, float).T + np.asarray(translation, float).reshape(3)
-    return points.assign(x_mm=new[:, 0], y_mm=new[:, 1], z_mm=new[:, 2])
-
-
-def fit_cylinder(points_mm: np.ndarray, direction0: tuple[float, float, float] = (0.0, 0.0, 1.0)) -> Cylinder:
-    """Least-squares cylinder through (N, 3) points, axis near ``direction0``.
-
-    The axis is parametrised by its point in the plane through the centroid normal to
-    ``direction0`` and two small tilts; residuals are distances to the surface, mm.
-    """
-    pts = np.asarray(points_mm, float)
-    d0 = np.asarray(direction0, float) / np.linalg.norm(direction0)
-    e1 = np.cross(d0, [1.0, 0.0, 0.0] if abs(d0[0]) < 0.9 else [0.0, 1.0, 0.0])
-    e1 /= np.linalg.norm(e1)
-    e2 = np.cross(d0, e1)
-    c0 = pts.mean(axis=0)
-
-    def axis(p):
-        d = d0 + p[2] * e1 + p[3] * e2
-        return c0 + p[0] * e1 + p[1] * e2, d / np.linalg.norm(d)
-
-    def resid(p):
-        o, d = axis(p)
-        v = pts - o
-        radial = v - np.outer(v @ d, d)
-        return np.sqrt((radial**2).sum(axis=1)) - p[4]
-
-    v = pts - c0
-    r0 = float(np.sqrt(((v - np.outer(v @ d0, d0)) ** 2).sum(axis=1)).mean())
-    sol = least_squares(resid, np.array([0.0, 0.0, 0.0, 0.0, r0]), x_scale=[1.0, 1.0, 1e-3, 1e-3, 1.0])
-    o, d = axis(sol.x)
-    return Cylinder(o, d, float(sol.x[4]), float(np.sqrt(np.mean(sol.fun**2))))
-
-
-def axis_frame(
-    cylinder: Cylinder, origin_near: tuple[float, float, float] = (0.0, 0.0, 0.0)
-) -> tuple[np.ndarray, np.ndarray]:
-    """The rigid motion ``x' = A x + b`` that puts the cylinder's axis on the z axis (keeping its
-    sense) with the point of the axis nearest ``origin_near`` at the origin, by the smallest
-    rotation. Returns ``(A, b)``."""
-    d = cylinder.direction / np.linalg.norm(cylinder.direction)
-    z = np.array([0.0, 0.0, 1.0])
-    axis = np.cross(d, z)
-    s, c = np.linalg.norm(axis), float(d @ z)
-    A = np.eye(3) if s < 1e-15 else cv2.Rodrigues(axis / s * np.arctan2(s, c))[0]
-    foot = cylinder.point + ((np.asarray(origin_near, float) - cylinder.point) @ d) * d
-    return A, -A @ foot
 
 
 def _air_reconstruction(

@@ -33,6 +33,7 @@ import numpy as np
 import pandas as pd
 from scipy.optimize import least_squares
 
+from triaxtrack.cell_frame import transform_points
 from triaxtrack.eccentricity import mark_radii, observation_eccentricity
 from triaxtrack.frames import read_test_fps
 from triaxtrack.jsonfile import read_json, write_json
@@ -47,7 +48,7 @@ from triaxtrack.optics import (
     trace_into_water,
     write_cameras,
 )
-from triaxtrack.sfm import REFERENCE_FRAME, transform_points
+from triaxtrack.sfm import REFERENCE_FRAME
 from triaxtrack.tables import LABELS, OBSERVATIONS, POINTS, RESIDUALS, read_table, write_table
 
 FD_STEP_MM = 1e-4  # finite-difference step of the point Jacobians (the projection is exact to ~1e-8 px)
@@ -315,7 +316,7 @@ def refine_cell(
     IDs, re-triangulating them for every trial. ``residuals``: the used observations of
     :func:`triangulate_refracted` (the outliers it dropped stay out). The cameras and the
     acrylic's index are held (the index and the thickness of the wall are nearly
-    interchangeable). The outer radius is also measured in air (:func:`triaxtrack.sfm.fit_cylinder`,
+    interchangeable). The outer radius is also measured in air (:func:`triaxtrack.cell_frame.fit_cylinder`,
     standard error ``outer_radius_sigma_mm``) and enters as a prior: through the water alone the
     three parameters are nearly interchangeable too.
     """
