@@ -36,13 +36,8 @@ from triaxtrack.optics import (
     project_air,
     read_cameras,
 )
-from triaxtrack.score import (
-    ScoreTolerances,
-    pixel_grid,
-    ray_direction_error,
-    score,
-    undistortion_map_error,
-)
+from triaxtrack.score import ScoreTolerances, score
+from triaxtrack.score_cameras import pixel_grid, ray_direction_error, undistortion_map_error
 from triaxtrack.simulate import SimulationConfig, board_poses, make_cameras, make_scene, render_calibration
 
 CAMERAS = ("cam01", "cam02")

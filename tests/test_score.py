@@ -164,9 +164,10 @@ def test_every_metric_is_documented_in_the_help_and_the_config_readme():
 
     import triaxtrack.camera_report as camera_report
     import triaxtrack.score as score_module
+    import triaxtrack.score_cameras as score_cameras
     from triaxtrack.cli import SCORE_HELP
 
-    source = Path(score_module.__file__).read_text() + Path(camera_report.__file__).read_text()
+    source = "".join(Path(m.__file__).read_text() for m in (score_module, score_cameras, camera_report))
     names = set(re.findall(r'_metric\(\s*"(\w+)"', source)) | set(
         re.findall(r'\(\s*"(\w+_rms_error)"', source)
     )
@@ -204,7 +205,7 @@ def test_a_camera_left_out_by_the_workflow_is_reported_not_failed():
     import numpy as np
 
     from triaxtrack.optics import Camera
-    from triaxtrack.score import score_cameras
+    from triaxtrack.score_cameras import score_cameras
 
     K = np.array([[800.0, 0, 320], [0, 800, 240], [0, 0, 1]])
     t = np.array([0.0, 0.0, 300.0])

@@ -74,7 +74,7 @@ def score_camera_quality(quality: pd.DataFrame, source: str = "tracking.parquet"
     table, per camera: ``centroid_sigma_median``, ``centroid_sigma_p95`` (px) and
     ``tracked_share`` (0-1). A camera without reported centroids gets no sigma rows (a NaN value
     would fail the score)."""
-    from triaxtrack.score import COLUMNS, _metric
+    from triaxtrack.score_table import COLUMNS, _metric
 
     rows = []
     for r in quality.itertuples(index=False):

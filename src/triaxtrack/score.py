@@ -10,195 +10,17 @@ reported), ``unit``, ``passed``, ``source`` (the results file scored).
 from __future__ import annotations
 
 import json
-from collections.abc import Collection
-from dataclasses import dataclass, fields
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
 from triaxtrack.calibrate import calibrated_camera, read_calibration
-from triaxtrack.optics import Camera, pixels_to_normalized, pixels_to_undistorted, read_cameras
+from triaxtrack.optics import Camera, read_cameras
+from triaxtrack.score_cameras import score_calibrations, score_cameras
+from triaxtrack.score_table import AT_LEAST, COLUMNS, ScoreTolerances, _metric
 
-COLUMNS = ["metric", "item", "value", "tolerance", "unit", "passed", "source"]
-AT_LEAST = {"membrane_3_rays"}  # per-frame metrics whose tolerance is a minimum
-UNDISTORTION_GRID_PX = 8  # spacing of the pixel grid the undistortion maps are compared on
-
-
-@dataclass(frozen=True)
-class ScoreTolerances:
-    """Pass limits (config ``score``); issue 3-5 metrics are added here as they land."""
-
-    focal_rel: float = 0.002
-    principal_point_px: float = 1.0
-    camera_center_mm: float = 0.5
-    camera_rotation_deg: float = 0.05
-    undistortion_px: float = 0.1
-    wrong_id_px: float = 1.0  # a label whose centroid is farther than this from the truth is wrong
-    wrong_ids: float = 0.0
-    coverage: float = 0.95  # minimum share of the targets the truth says a camera sees
-    cell_centroid_median_px: float = 0.05
-    cell_centroid_p95_px: float = 0.15
-    mean_reprojection_px: float = 0.3  # reconstruction (quality.json), all cameras and per camera
-    membrane_rms_mm: float = 0.05  # 3-D error of the membrane dots against the truth
-    membrane_3_rays: float = 0.9  # minimum share of the membrane dots reconstructed from 3+ rays
-    id_swaps: float = 0.0  # tracked observations farther than wrong_id_px from their own truth
-    membrane_kept: float = 0.95  # share of the membrane dots visible at the start still at the end
-    volume_rel: float = 0.0025  # |V - V_true| / V_true at every processed frame
-    volume_change_rel: float = 0.0005  # |dV - dV_true| / V0_true at every processed frame
-    axial_strain: float = 0.0005  # |axial strain - true|, at every processed frame
-    clock_offset_frames: float = 1.0  # |estimated - true| clock offset of the load-frame log, frames
-    q_rel: float = 0.005  # |q - q_true| / q_true on the mean area, where q_true > 10 % of its peak
-    q_abs_kpa: float = 1.0  # |q - q_true| on the mean area elsewhere, kPa
-
-    @staticmethod
-    def from_dict(d: dict | None) -> ScoreTolerances:
-        d = dict(d or {})
-        known = {f.name for f in fields(ScoreTolerances)}
-        return ScoreTolerances(**{k: float(v) for k, v in d.items() if k in known})
-
-
-def rotation_angle_deg(Ra: np.ndarray, Rb: np.ndarray) -> float:
-    """Angle of the rotation between two rotation matrices, degrees."""
-    c = (np.trace(Ra.T @ Rb) - 1) / 2
-    return float(np.degrees(np.arccos(np.clip(c, -1.0, 1.0))))
-
-
-def _metric(
-    metric: str,
-    item: str,
-    value: float,
-    tolerance: float = np.nan,
-    unit: str = "",
-    source: str = "",
-    minimum: bool = False,
-) -> dict:
-    """One score row; it passes when within tolerance (at least it, for a ``minimum``), or when
-    only reported (no tolerance)."""
-    within = value >= tolerance if minimum else value <= tolerance
-    passed = bool(np.isfinite(value) and (np.isnan(tolerance) or within))
-    return dict(
-        metric=metric, item=item, value=value, tolerance=tolerance, unit=unit, passed=passed, source=source
-    )
-
-
-def pixel_grid(width: int, height: int, step_px: int = UNDISTORTION_GRID_PX) -> np.ndarray:
-    """(N, 2) pixel positions every ``step_px`` over the whole image, the last row and column
-    (``width - 1``, ``height - 1``) included."""
-    u = np.unique(np.r_[np.arange(0, width, step_px), width - 1])
-    v = np.unique(np.r_[np.arange(0, height, step_px), height - 1])
-    uu, vv = np.meshgrid(u, v)
-    return np.c_[uu.ravel(), vv.ravel()].astype(np.float64)
-
-
-def undistortion_map_error(est: Camera, truth: Camera, step_px: int = UNDISTORTION_GRID_PX) -> float:
-    """Largest difference, in pixels, between two cameras' undistortion maps over the whole image.
-
-    A camera's undistortion map takes each pixel of its distorted image to where it lies in
-    the undistorted image with the same camera matrix: ``K @ undistort(uv)``, i.e.
-    ``cv2.undistortPoints(uv, K, dist, P=K)``, the inverse of the map that
-    ``cv2.initUndistortRectifyMap(K, dist, None, K)`` builds for ``cv2.remap``. Both maps are
-    evaluated at every pixel of :func:`pixel_grid` of the true image (its corners included,
-    which a remapped image of the same size would crop), each with its own K and distortion;
-    the result is the largest distance between the two undistorted positions. Errors of the
-    focal length, principal point and distortion count in it as far as they change where a
-    pixel maps to: a principal point shifted by p px (distortion unchanged, k1 = -0.3) moves
-    the map by ~0 at the image centre and by up to ~p at the image corners. The direction of
-    the ray through each pixel is :func:`ray_direction_error`. ``inf`` where either map
-    cannot be inverted (:func:`triaxtrack.optics.pixels_to_normalized`).
-    """
-    uv = pixel_grid(truth.width, truth.height, step_px)
-    err = np.linalg.norm(pixels_to_undistorted(est, uv) - pixels_to_undistorted(truth, uv), axis=1)
-    return float(err.max()) if np.isfinite(err).all() else float("inf")
-
-
-def ray_direction_error(est: Camera, truth: Camera, step_px: int = UNDISTORTION_GRID_PX) -> float:
-    """Largest difference between two cameras' ray directions through the pixels of the image,
-    in pixels of the true focal length (reported, not a pass limit).
-
-    For every pixel of :func:`pixel_grid` of the true image, the undistorted normalised
-    coordinates under the estimated and the true K and distortion are compared; the difference
-    is scaled by the true focal lengths (fx for x, fy for y). Unlike
-    :func:`undistortion_map_error`, the whole principal-point error counts in it at every
-    pixel (and a focal-length error grows towards the image edges), so it is what a pose or a
-    triangulation from these intrinsics sees. ``inf`` where either map cannot be inverted.
-    """
-    uv = pixel_grid(truth.width, truth.height, step_px)
-    d = (pixels_to_normalized(est, uv) - pixels_to_normalized(truth, uv)) * [truth.K[0, 0], truth.K[1, 1]]
-    err = np.hypot(d[:, 0], d[:, 1])
-    return float(err.max()) if np.isfinite(err).all() else float("inf")
-
-
-def score_cameras(
-    result: dict[str, Camera], truth: dict[str, Camera], tol: ScoreTolerances, source: str = "cameras.json",
-    left_out: Collection[str] = (),
-) -> pd.DataFrame:  # fmt: skip
-    """Per-camera intrinsic and pose errors of estimated cameras against the true ones.
-
-    A camera whose pose is the identity (intrinsics only, e.g. after calibration) is scored on
-    its intrinsics alone. Cameras missing from, or unknown to, the truth fail.
-    """
-    rows = []
-    for name, cam in sorted(result.items()):
-        if name not in truth:
-            rows.append(_metric("camera_unknown", name, np.nan, source=source))
-            continue
-        tr = truth[name]
-        f_err = max(abs(cam.K[0, 0] / tr.K[0, 0] - 1), abs(cam.K[1, 1] / tr.K[1, 1] - 1))
-        pp = float(np.hypot(cam.K[0, 2] - tr.K[0, 2], cam.K[1, 2] - tr.K[1, 2]))
-        rows.append(_metric("focal_rel_error", name, f_err, tol.focal_rel, source=source))
-        rows.append(_metric("principal_point_error", name, pp, tol.principal_point_px, "px", source))
-        if not (np.allclose(cam.R, np.eye(3)) and np.allclose(cam.t, 0)):
-            dc = float(np.linalg.norm(cam.center - tr.center))
-            rows.append(_metric("camera_center_error", name, dc, tol.camera_center_mm, "mm", source))
-            rot = rotation_angle_deg(cam.R, tr.R)
-            rows.append(_metric("camera_rotation_error", name, rot, tol.camera_rotation_deg, "deg", source))
-    for name in sorted(set(truth) - set(result)):  # a camera the workflow left out and said so: reported
-        if name in left_out:
-            why = "why: quality.json"
-            rows.append(_metric("camera_left_out", name, 1.0, unit=why, source="quality.json"))
-        else:
-            rows.append(_metric("camera_missing", name, np.nan, source=source))
-    return pd.DataFrame(rows, columns=COLUMNS)
-
-
-def score_calibrations(
-    result: dict[str, Camera], truth: dict[str, Camera], tol: ScoreTolerances,
-    left_out: Collection[str] = (),
-) -> pd.DataFrame:  # fmt: skip
-    """Per-camera errors of calibrated intrinsics (identity poses) against the true cameras:
-    ``focal_rel_error``, ``principal_point_error``, ``undistortion_map_error``
-    (:func:`undistortion_map_error`, tolerance ``undistortion_px``) and, reported only,
-    ``ray_direction_error`` (:func:`ray_direction_error`). A calibration whose image size is not
-    the true camera's gets a failing ``image_size_mismatch`` row instead of the two map rows;
-    cameras missing from, or unknown to, the truth fail, but for those the workflow left out
-    (``left_out``: quality.json ``cameras_left_out``), reported as in :func:`score_cameras`."""
-    df = score_cameras(result, truth, tol, left_out=left_out)
-    said = df["metric"] == "camera_left_out"
-    df.loc[~said, "source"] = "calibration/" + df.loc[~said, "item"] + ".json"
-    rows = []
-    for name, cam in sorted(result.items()):
-        if name not in truth:
-            continue
-        tr = truth[name]
-        source = f"calibration/{name}.json"
-        if (cam.width, cam.height) != (tr.width, tr.height):
-            rows.append(_metric("image_size_mismatch", name, np.nan, source=source))
-            continue
-        err = undistortion_map_error(cam, tr)
-        rows.append(_metric("undistortion_map_error", name, err, tol.undistortion_px, "px", source))
-        rows.append(
-            _metric("ray_direction_error", name, ray_direction_error(cam, tr), unit="px", source=source)
-        )
-    out = pd.concat([df, pd.DataFrame(rows, columns=COLUMNS)], ignore_index=True)
-    order = {"camera_unknown": 0, "focal_rel_error": 1, "principal_point_error": 2}
-    key = out.metric.map(order).fillna(3)
-    return (
-        out.assign(_k=key)
-        .sort_values(["item", "_k"], kind="stable")
-        .drop(columns="_k")
-        .reset_index(drop=True)
-    )
+__all__ = ["AT_LEAST", "COLUMNS", "ScoreTolerances", "_metric", "format_table", "score", "summarise_frames"]
 
 
 def read_calibrations(folder: str | Path) -> dict[str, Camera]:
@@ -520,7 +342,6 @@ def score(results_dir: str | Path, truth_dir: str | Path, tol: ScoreTolerances |
     if not parts:
         return pd.DataFrame(columns=COLUMNS)
     return pd.concat(parts, ignore_index=True)
-
 
 
 def _score_labels(
