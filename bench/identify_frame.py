@@ -9,7 +9,6 @@ A quick check of detection and identification on many renders:
     FRAME=1 .venv/bin/python bench/identify_frame.py /tmp/t
 """
 
-import json
 import os
 import sys
 from pathlib import Path
@@ -22,10 +21,11 @@ from triaxtrack.identify import label_frame
 from triaxtrack.kit import ct_codes, load_kit_design, target_table
 from triaxtrack.optics import Camera
 from triaxtrack.score import ScoreTolerances, score_identification
+from triaxtrack.testfolder import read_cameras_doc
 
 
 def main(test_dir: Path, frame: int) -> pd.DataFrame:
-    cams = json.loads((test_dir / "truth/cameras.json").read_text())["cameras"]
+    cams = read_cameras_doc(test_dir / "truth/cameras.json")
     design = load_kit_design(test_dir / "kit")
     codes = ct_codes(design, target_table(design))
     labels = []

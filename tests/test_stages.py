@@ -18,7 +18,7 @@ import pytest
 import yaml
 from test_reconstruct import _observations  # noisy labels of the synthetic scene
 
-from triaxtrack.frames import read_test_fps, read_test_yaml, run_frame_map
+from triaxtrack.frames import run_frame_map
 from triaxtrack.identify import run_identify_targets
 from triaxtrack.jsonfile import read_json, write_json
 from triaxtrack.kit import design_points
@@ -27,6 +27,7 @@ from triaxtrack.sfm import REFERENCE_FRAME
 from triaxtrack.sfm_stage import run_reconstruct_cell
 from triaxtrack.simulate import SimulationConfig, make_cameras
 from triaxtrack.tables import FRAME_MAP, LABELS, OBSERVATIONS, POINTS, TRACKS, read_table, write_table
+from triaxtrack.testfolder import read_test_fps, read_test_yaml
 from triaxtrack.timesteps import MOTION, run_collect_timesteps, run_triangulate_chunk
 from triaxtrack.track_stage import run_track_targets
 from triaxtrack.triangulate import run_trace_specimen

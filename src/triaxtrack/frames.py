@@ -37,9 +37,14 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
-import yaml
 
 from triaxtrack.tables import FRAME_MAP, conform, write_table
+from triaxtrack.testfolder import read_test_cameras, read_test_frames
+
+# re-exported for timesteps, track_stage and stress, which import them from here (for now:
+# triaxtrack.testfolder owns test.yaml)
+from triaxtrack.testfolder import read_test_fps as read_test_fps
+from triaxtrack.testfolder import read_test_yaml as read_test_yaml
 from triaxtrack.video import SparseFrames, iter_frames, keyframe_indices, probe_video
 
 SUBFRAME_TOL_FRAMES = 0.05  # |start_offset_s * fps - m| above this: the camera is off the test frames
@@ -83,48 +88,11 @@ class CameraTiming:
         return abs(self.offset_residual_s * self.fps) > SUBFRAME_TOL_FRAMES
 
 
-def _load_test_yaml(path: Path):
-    """The parsed document of a test.yaml (any YAML value); OSError or YAMLError as raised. The
-    package's one ``yaml.safe_load`` of test.yaml: :func:`read_test_yaml` and the readers below."""
-    return yaml.safe_load(path.read_text())
-
-
-def read_test_yaml(test_yaml: str | Path) -> dict:
-    """A test.yaml as a mapping (``test-folder.md``; not validated: the workflow validates it
-    when it loads); ValueError naming the file when it is unreadable or not a mapping."""
-    path = Path(test_yaml)
-    try:
-        doc = _load_test_yaml(path)
-    except (OSError, yaml.YAMLError) as err:
-        raise ValueError(f"{path}: not a readable test.yaml: {err}") from err
-    if not isinstance(doc, dict):
-        raise ValueError(f"{path}: not a readable test.yaml: not a mapping")
-    return doc
-
-
-def read_test_fps(test_yaml: str | Path) -> float:
-    """test.yaml's ``fps``: the test clock's frames per second (module docstring); ValueError
-    naming the file when it is unreadable or has no positive ``fps``."""
-    doc = read_test_yaml(test_yaml)
-    try:
-        fps = float(doc["fps"])
-    except (KeyError, TypeError, ValueError) as err:
-        raise ValueError(f"{test_yaml}: test.yaml has no usable fps: {err!r}") from err
-    if not fps > 0:
-        raise ValueError(f"{test_yaml}: test.yaml's fps must be positive, not {fps}")
-    return fps
-
-
 def read_camera_timing(test_yaml: str | Path, camera: str) -> CameraTiming:
     """The timing of one camera from a test.yaml (cameras given as names or mappings);
     ValueError naming the file when it is unreadable or does not list the camera."""
     path = Path(test_yaml)
-    try:
-        doc = _load_test_yaml(path)
-        fps = float(doc["fps"])
-        entries = [c if isinstance(c, dict) else {"name": c} for c in doc["cameras"]]
-    except (OSError, yaml.YAMLError, KeyError, TypeError, ValueError) as err:
-        raise ValueError(f"{path}: not a readable test.yaml (needs fps and cameras): {err}") from err
+    fps, entries = read_test_cameras(path)
     entry = next((c for c in entries if c.get("name") == camera), None)
     if entry is None:
         raise ValueError(f"{path}: camera {camera!r} is not listed in cameras")
@@ -144,12 +112,9 @@ def count_test_frames(test_yaml: str | Path, video: str | Path | None = None) ->
     (the workflow passes the first camera's, as its chunking does); ValueError naming the file
     when neither is there."""
     path = Path(test_yaml)
-    try:
-        doc = _load_test_yaml(path)
-    except (OSError, yaml.YAMLError) as err:
-        raise ValueError(f"{path}: not a readable test.yaml: {err}") from err
-    if isinstance(doc, dict) and doc.get("frames") is not None:
-        return int(doc["frames"])
+    frames = read_test_frames(path)
+    if frames is not None:
+        return frames
     if video is None:
         raise ValueError(f"{path}: no `frames`, and no video to count the test frames in")
     return int(probe_video(video)["frames"])

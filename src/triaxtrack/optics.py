@@ -13,14 +13,13 @@ coordinates, converged to 1e-6 mm) and then applies OpenCV's distortion.
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import cv2
 import numpy as np
 
-from triaxtrack.jsonfile import write_json
+from triaxtrack.testfolder import read_cameras_doc, write_cameras_doc
 
 NEWTON_MAX_ITER = 30
 NEWTON_TOL_MM = 1e-6  # point-to-ray distance accepted as converged (~3e-6 px at 300 mm)
@@ -79,18 +78,17 @@ class Camera:
 
 def read_cameras(path: str | Path) -> dict[str, Camera]:
     """The cameras of a ``cameras.json`` (``test-folder.md``); ValueError naming the file."""
-    path = Path(path)
+    cams = read_cameras_doc(path)
     try:
-        cams = json.loads(path.read_text())["cameras"]
         return {k: Camera.from_json(k, v) for k, v in cams.items()}
-    except (OSError, KeyError, TypeError, ValueError) as err:
+    except (KeyError, TypeError, ValueError) as err:
         raise ValueError(f"{path}: not a cameras.json: {err}") from err
 
 
 def write_cameras(path: str | Path, cameras: dict[str, Camera]) -> None:
     """Write ``cameras`` (name -> :class:`Camera`, in the order given) as a ``cameras.json``
     (``test-folder.md``), the file :func:`read_cameras` reads."""
-    write_json(path, {"cameras": {name: cam.to_json() for name, cam in cameras.items()}})
+    write_cameras_doc(path, {name: cam.to_json() for name, cam in cameras.items()})
 
 
 @dataclass(frozen=True)

@@ -9,41 +9,24 @@ reported), ``unit``, ``passed``, ``source`` (the results file scored).
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
-from triaxtrack.calibrate import calibrated_camera, read_calibration
+from triaxtrack.calibrate import calibrated_camera
 from triaxtrack.optics import Camera, read_cameras
 from triaxtrack.score_cameras import score_calibrations, score_cameras
 from triaxtrack.score_table import AT_LEAST, COLUMNS, ScoreTolerances, _metric
+from triaxtrack.testfolder import read_calibration_folder, read_quality
 
 __all__ = ["AT_LEAST", "COLUMNS", "ScoreTolerances", "_metric", "format_table", "score", "summarise_frames"]
 
 
 def read_calibrations(folder: str | Path) -> dict[str, Camera]:
-    """The calibrated cameras ``folder/<camera>.json`` (identity pose); ValueError naming a file
-    that is not a calibration result or whose ``camera`` is not its file name. A truth folder's
-    board poses (``truth/calibration/<camera>.json``, key ``board_poses``) are skipped."""
-    cams = {}
-    for path in sorted(Path(folder).glob("*.json")):
-        if _is_board_poses(path):
-            continue
-        cal = read_calibration(path)
-        if cal["camera"] != path.stem:
-            raise ValueError(f"{path}: holds camera {cal['camera']!r}, not {path.stem!r}")
-        cams[path.stem] = calibrated_camera(cal)
-    return cams
-
-
-def _is_board_poses(path: Path) -> bool:
-    try:
-        doc = json.loads(path.read_text())
-    except (OSError, ValueError):
-        return False
-    return isinstance(doc, dict) and "board_poses" in doc and "K" not in doc
+    """The calibrated cameras ``folder/<camera>.json`` (identity pose;
+    :func:`~triaxtrack.testfolder.read_calibration_folder`)."""
+    return {name: calibrated_camera(cal) for name, cal in read_calibration_folder(folder).items()}
 
 
 # ---------------------------------------------------------------- identification (issue 3)
@@ -312,7 +295,7 @@ def score(results_dir: str | Path, truth_dir: str | Path, tol: ScoreTolerances |
     parts = []
     truth_cameras = read_cameras(truth_dir / "cameras.json")
     quality_path = results_dir / "quality.json"
-    quality = json.loads(quality_path.read_text()) if quality_path.exists() else {}
+    quality = read_quality(quality_path) if quality_path.exists() else {}
     calibrations = read_calibrations(results_dir / "calibration")
     if calibrations:
         left_out = quality.get("cameras_left_out", {})

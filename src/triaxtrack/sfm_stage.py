@@ -7,13 +7,13 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from triaxtrack.calibrate.files import calibrated_camera, read_calibration
+from triaxtrack.calibrate.files import calibrated_camera
 from triaxtrack.eccentricity import mark_radii
-from triaxtrack.jsonfile import write_json
 from triaxtrack.kit import design_points, load_kit_design, target_table
 from triaxtrack.optics import configured_cell
 from triaxtrack.sfm import SfmConfig, cell_summary, reconstruct_cell
 from triaxtrack.tables import LABELS, POINTS, RESIDUALS, read_table, write_table
+from triaxtrack.testfolder import read_calibration, write_cell
 
 
 def run_reconstruct_cell(
@@ -53,7 +53,7 @@ def run_reconstruct_cell(
         cameras, labelled, design_pts[wall], cfg, water=water, cell=optics, mark_radius_mm=radii
     )
     summary = cell_summary(rec)
-    write_json(cell, summary)
+    write_cell(cell, summary)
     write_table(rec.points.assign(frame=0, time_s=0.0), points, POINTS)
     write_table(rec.residuals, residuals, RESIDUALS)
     print(json.dumps({k: v for k, v in summary.items() if k != "cameras"}, indent=2))

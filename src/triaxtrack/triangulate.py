@@ -35,8 +35,6 @@ from scipy.optimize import least_squares
 
 from triaxtrack.cell_frame import transform_points
 from triaxtrack.eccentricity import mark_radii, observation_eccentricity
-from triaxtrack.frames import read_test_fps
-from triaxtrack.jsonfile import read_json, write_json
 from triaxtrack.kit import design_points, load_kit_design, target_table
 from triaxtrack.optics import (
     Camera,
@@ -50,6 +48,7 @@ from triaxtrack.optics import (
 )
 from triaxtrack.sfm import REFERENCE_FRAME
 from triaxtrack.tables import LABELS, OBSERVATIONS, POINTS, RESIDUALS, read_table, write_table
+from triaxtrack.testfolder import read_cell, read_test_fps, write_quality
 
 FD_STEP_MM = 1e-4  # finite-difference step of the point Jacobians (the projection is exact to ~1e-8 px)
 REFINE_CELL_STEPS = (0.01, 0.01, 1e-4)  # finite-difference steps: outer radius mm, wall mm, n_water
@@ -553,7 +552,7 @@ def run_trace_specimen(
 
     from triaxtrack.plots import reconstruction_picture
 
-    cell_doc = read_json(cell, "cell.json")
+    cell_doc = read_cell(cell)
     design = load_kit_design(kit)
     table = target_table(design)
     design_pts = design_points(design, table)
@@ -575,7 +574,7 @@ def run_trace_specimen(
     used = rec.residuals[rec.residuals["used"]]
     write_table(used[used["frame"] == REFERENCE_FRAME], observations, OBSERVATIONS)
     write_table(rec.residuals, residuals, RESIDUALS)
-    write_json(quality, report)
+    write_quality(quality, report)
     water_used = used[used["medium"] == "water"]
     image = reconstruction_picture(
         rec.cameras, rec.points, rec.cell, water_used, membrane_ids, report["mean_reprojection_px"]

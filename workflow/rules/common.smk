@@ -15,7 +15,8 @@ from snakemake.exceptions import WorkflowError
 from snakemake.logging import logger
 from snakemake.utils import validate
 
-from triaxtrack.errors import schema_problems, source_of, unknown_top_level_keys
+from triaxtrack.errors import schema_problems, source_of
+from triaxtrack.testfolder import TEST_YAML, TestFolder, TestFolderError
 
 CONFIG_SCHEMA_PATH = workflow.source_path("../schemas/config.schema.yaml")
 TEST_SCHEMA_PATH = workflow.source_path("../schemas/test.schema.yaml")
@@ -85,37 +86,27 @@ _validate_config()
 
 
 def load_test_yaml(folder):
-    """Read and validate FOLDER/test.yaml; return it with `cameras` as a list of mappings
-    (`{"name": ...}` plus the optional per-camera keys) and `kit` defaulted to "kit".
-    Raises WorkflowError naming the file, the key and a near miss on any problem; warns about
-    top-level keys the workflow does not read (allowed: a recorder may write more)."""
-    path = Path(folder) / "test.yaml"
-    if not path.is_file():
-        raise WorkflowError(f"recorded test folder {folder!s}: {path} not found")
-    try:
-        with open(path) as f:
-            doc = yaml.safe_load(f)
-    except yaml.YAMLError as exc:
-        raise WorkflowError(f"{path}: not valid YAML: {exc}") from exc
+    """Read and validate FOLDER/test.yaml (triaxtrack.testfolder.TestFolder); return it with
+    `cameras` as a list of mappings (`{"name": ...}` plus the optional per-camera keys) and
+    `kit` defaulted to "kit". Raises WorkflowError naming the file, the key and a near miss on
+    any problem; warns about top-level keys the workflow does not read (allowed: a recorder
+    may write more)."""
     schema = _load_schema(TEST_SCHEMA_PATH)
-    unknown = unknown_top_level_keys(doc, schema)
+    try:
+        test = TestFolder.load(folder, schema)
+    except TestFolderError as exc:
+        _warn_unknown_keys(Path(folder) / TEST_YAML, exc.unknown_keys, schema)
+        raise WorkflowError(str(exc)) from None
+    _warn_unknown_keys(test.test_yaml, test.unknown_keys, schema)
+    return test.doc
+
+
+def _warn_unknown_keys(path, unknown, schema):
     if unknown:
         logger.warning(
             f"{path}: unknown top-level key(s) {', '.join(unknown)}: not read by the "
             f"workflow, which reads {', '.join(sorted(schema['properties']))}"
         )
-    problems = schema_problems(doc, schema, [(str(path), doc)])
-    if problems:
-        raise WorkflowError(
-            "a recorded test's test.yaml is not valid (see config/README.md, `tests`):\n  "
-            + "\n  ".join(problems)
-        )
-    cameras = [c if isinstance(c, dict) else {"name": c} for c in doc["cameras"]]
-    names = [c["name"] for c in cameras]
-    duplicates = sorted({n for n in names if names.count(n) > 1})
-    if duplicates:
-        raise WorkflowError(f"{path}: camera names listed more than once: {duplicates}")
-    return {**doc, "cameras": cameras, "kit": doc.get("kit", "kit")}
 
 
 # ---------------------------------------------------------------- the tests

@@ -65,8 +65,9 @@ Modules:
   (:func:`find_board`, :class:`BoardImage`);
 * :mod:`~triaxtrack.calibrate.fit`: the two-stage fit and the outlier rejection
   (:func:`fit_views`, :func:`calibrate_views`);
-* :mod:`~triaxtrack.calibrate.files`: the kit's board.json, the board images and the result JSON
-  (:func:`read_calibration`, :func:`calibrated_camera`, :func:`format_calibration`);
+* :mod:`~triaxtrack.calibrate.files`: the kit's board.json, the board images and the result
+  (:func:`calibrated_camera`, :func:`format_calibration`; its file:
+  :func:`triaxtrack.testfolder.read_calibration`);
 * :mod:`~triaxtrack.calibrate.pipeline`: one camera end to end (:func:`calibrate_camera`), and
   the workflow's stage (:func:`run_calibrate_camera`).
 """
@@ -109,7 +110,6 @@ from triaxtrack.calibrate.files import (
     format_calibration,
     list_board_images,
     read_board,
-    read_calibration,
 )
 from triaxtrack.calibrate.fit import (
     CALIBRATE_CRITERIA,
@@ -149,7 +149,7 @@ __all__ = [
     "canonical_corner_order", "checkered", "consistent_corners", "detect_boards", "find_board",
     "find_board_corners", "find_partial_board", "find_whole_board", "fit_views", "format_calibration",
     "grid_indices", "grow_grid", "list_board_images", "neighbour_spacing_px", "outlier_limit_px",
-    "read_board", "read_calibration", "refine_boards", "refine_corners", "refine_view", "right_handed",
+    "read_board", "refine_boards", "refine_corners", "refine_view", "right_handed",
     "run_calibrate_camera",
     "saddle_points", "smooth_image", "view_rms_px",
 ]  # fmt: skip

@@ -1,5 +1,6 @@
-"""The calibration's files: the kit's board.json, a camera's board images, and the result JSON
-(read back, turned into a Camera, summarised for the job log)."""
+"""The calibration's files: the kit's board.json, a camera's board images, and the result
+(turned into a Camera, summarised for the job log; the JSON file itself is read and written by
+:mod:`triaxtrack.testfolder`)."""
 
 from __future__ import annotations
 
@@ -48,23 +49,6 @@ def _read_gray(camera: str, path: str | Path) -> np.ndarray:
     if gray is None:
         raise CalibrationError(f"camera {camera}: cannot read board image {path}")
     return gray
-
-
-def read_calibration(path: str | Path) -> dict:
-    """A calibration result (module docstring); ValueError naming the file if it is not one."""
-    path = Path(path)
-    try:
-        cal = json.loads(path.read_text())
-        for key in ("camera", "width", "height", "K", "dist"):
-            if key not in cal:
-                raise ValueError(f"no {key!r}")
-        K = np.asarray(cal["K"], float)
-        dist = np.asarray(cal["dist"], float)
-        if K.shape != (3, 3) or dist.ndim != 1 or len(dist) < 4:
-            raise ValueError(f"K must be 3 x 3 and dist 4+ coefficients, not {K.shape} and {dist.shape}")
-    except (OSError, ValueError, TypeError) as err:
-        raise ValueError(f"{path}: not a calibration result: {err}") from err
-    return cal
 
 
 def calibrated_camera(cal: dict) -> Camera:

@@ -14,7 +14,7 @@ from triaxtrack.calibrate.config import CalibrationConfig, CalibrationError
 from triaxtrack.calibrate.corners import refine_view
 from triaxtrack.calibrate.files import _read_gray, format_calibration, list_board_images, read_board
 from triaxtrack.calibrate.fit import _object_points, calibrate_views
-from triaxtrack.jsonfile import write_json
+from triaxtrack.testfolder import write_calibration
 
 
 def detect_boards(
@@ -98,5 +98,5 @@ def run_calibrate_camera(
 
     cfg = CalibrationConfig.from_dict(calibration_cfg)
     result = {**calibrate_camera(camera, folder, kit, cfg), "triaxtrack_version": __version__}
-    write_json(calibration, result)
+    write_calibration(calibration, result)
     print(format_calibration(result))

@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import pandas as pd
 
-from triaxtrack.calibrate.files import calibrated_camera, read_calibration
+from triaxtrack.calibrate.files import calibrated_camera
 from triaxtrack.detect import DetectParams, background_size_px
 from triaxtrack.identify.anchors import _axis_down, _pedestal_anchors
 from triaxtrack.identify.cell import (
@@ -40,6 +40,7 @@ from triaxtrack.identify.merged import _recentred_beside_edge, _split_merged_pai
 from triaxtrack.identify.state import LABEL_COLUMNS, NOT_REACHED, UNLABELLED, IdentifyParams, _Frame
 from triaxtrack.kit import ct_codes, load_kit_design, target_table
 from triaxtrack.tables import FRAME_MAP, LABELS, concat_tables, read_table, write_table
+from triaxtrack.testfolder import read_calibration
 
 if TYPE_CHECKING:
     from triaxtrack.optics import Camera

@@ -21,13 +21,13 @@ from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 
 from triaxtrack.camera_report import camera_quality, camera_quality_figure
-from triaxtrack.jsonfile import read_json
 from triaxtrack.kit import load_kit_design
 from triaxtrack.report.common import chosen_frames, number
 from triaxtrack.report.layout import MembraneLayout, membrane_layout
 from triaxtrack.report.maps import strain_maps_figure
 from triaxtrack.report.style import PALETTE, new_figure, no_data, save_figure, styled
 from triaxtrack.tables import LABELS, STRAINS, TRACKS, VOLUME, read_table
+from triaxtrack.testfolder import read_quality
 from triaxtrack.timesteps import LARGE_LOSS_SHARE, large_losses
 
 __all__ = [
@@ -365,7 +365,7 @@ def run_report_figures(
     print(f"kit: {layout.describe()}")
     vol = read_table(volume, VOLUME)
     local = read_table(strains, STRAINS)
-    report = read_json(quality, "quality.json")
+    report = read_quality(quality)
     tracks = read_table(tracking, TRACKS)
     cameras = camera_quality(tracks, read_table(labels, LABELS))
     print(cameras.to_string(index=False))

@@ -57,7 +57,8 @@ def check_simulation(test_dir: str | Path, out_json: str | Path | None = None) -
     and calibration images. ``ok`` is true when every video has the frames its camera recorded
     and the median errors are within 0.10 px (air) and 0.15 px (water).
     """
-    from triaxtrack.frames import frame_map, read_camera_timing, read_test_frame, read_test_yaml
+    from triaxtrack.frames import frame_map, read_camera_timing, read_test_frame
+    from triaxtrack.testfolder import camera_entries, read_test_yaml
     from triaxtrack.video import probe_video
 
     test_dir = Path(test_dir)
@@ -68,8 +69,8 @@ def check_simulation(test_dir: str | Path, out_json: str | Path | None = None) -
     truth_obs = read_table(test_dir / "truth" / "observations.parquet", OBSERVATIONS)
     targets = pd.read_csv(test_dir / "kit" / "targets.csv").set_index("id")
     rows, per_camera = [], {}
-    for entry in meta["cameras"]:
-        cam = entry["name"] if isinstance(entry, dict) else entry
+    for entry in camera_entries(meta["cameras"]):
+        cam = entry["name"]
         video = test_dir / "videos" / f"{cam}.mp4"
         info = probe_video(video)
         n_cal = len(list((test_dir / "calibration" / cam).glob("*.png")))
