@@ -40,11 +40,6 @@ import pandas as pd
 
 from triaxtrack.tables import FRAME_MAP, conform, write_table
 from triaxtrack.testfolder import read_test_cameras, read_test_frames
-
-# re-exported for timesteps, track_stage and stress, which import them from here (for now:
-# triaxtrack.testfolder owns test.yaml)
-from triaxtrack.testfolder import read_test_fps as read_test_fps
-from triaxtrack.testfolder import read_test_yaml as read_test_yaml
 from triaxtrack.video import SparseFrames, iter_frames, keyframe_indices, probe_video
 
 SUBFRAME_TOL_FRAMES = 0.05  # |start_offset_s * fps - m| above this: the camera is off the test frames
@@ -224,7 +219,12 @@ class ProcessedTestFrames:
     """
 
     def __init__(
-        self, video_path: str | Path, fmap: pd.DataFrame, start: int, stop: int, processed: Sequence[int]
+        self,
+        video_path: str | Path,
+        fmap: pd.DataFrame,
+        start: int,
+        stop: int,
+        processed: Sequence[int] | np.ndarray,
     ) -> None:
         self.rows = _rows(fmap, range(start, stop))
         keep = self.rows.index.isin(np.r_[np.asarray(processed, np.int64), start])

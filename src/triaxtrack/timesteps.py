@@ -30,8 +30,7 @@ import pandas as pd
 
 from triaxtrack.codec_lag import corrected_tracks, read_lag_files
 from triaxtrack.eccentricity import mark_radii
-from triaxtrack.frames import read_test_fps
-from triaxtrack.jsonfile import read_json, write_json
+from triaxtrack.jsonfile import write_json
 from triaxtrack.kit import load_kit_design, target_table
 from triaxtrack.optics import Camera, CellOptics, project_air, read_cameras
 from triaxtrack.refractive_pose import pnp_pose
@@ -46,6 +45,7 @@ from triaxtrack.tables import (
     read_table,
     write_table,
 )
+from triaxtrack.testfolder import read_quality, read_test_fps
 from triaxtrack.triangulate import TriangulationConfig, quality_cell, triangulate_refracted
 
 MOVED_PX = 0.3  # default: a camera whose cell-wall targets drift by more (median) has moved
@@ -124,8 +124,8 @@ def _interpolated_eccentricity(ecc_at: dict[int, pd.DataFrame], frame: int, obs:
         vals.append(v)
         weights.append(np.where(np.isfinite(v[:, 0]), w, 0.0))
     total = np.sum(weights, axis=0)
-    for v, w in zip(vals, weights, strict=True):
-        out += np.nan_to_num(v) * (w / np.where(total > 0, total, 1.0))[:, None]
+    for v, share in zip(vals, weights, strict=True):
+        out += np.nan_to_num(v) * (share / np.where(total > 0, total, 1.0))[:, None]
     return out
 
 
@@ -430,7 +430,7 @@ def run_triangulate_chunk(
     ``reconstruction_cfg`` and ``tracking_cfg`` the config's ``reconstruction`` and ``tracking``
     sections. Writes the ``points``, ``residuals`` and ``motion`` tables; prints counts."""
     posed = read_cameras(cameras)
-    cell = quality_cell(read_json(reference, "quality.json"))
+    cell = quality_cell(read_quality(reference))
     design = load_kit_design(kit)
     table = target_table(design)
     fps = read_test_fps(test_yaml)
@@ -491,7 +491,7 @@ def run_collect_timesteps(
     tracked = concat_tables(tracks, TRACKS)
     shared = concat_tables(handovers, TRACKS)
     checks = handover_checks(shared, read_table(labels, LABELS), handover_px)
-    first = read_json(reference, "quality.json")
+    first = read_quality(reference)
     report = timestep_quality(first, pts, res, tracked, moves, checks, membrane_ids, cameras_left_out)
     write_table(pts, points, POINTS)
     write_table(observations_table(tracked, res), observations, OBSERVATIONS)

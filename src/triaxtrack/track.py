@@ -510,7 +510,7 @@ def track_frames(
         if i == 0 and gray is None:
             raise ValueError(f"{camera}: no picture of the labelled frame {k}")
         uv, area, sigma, reason = _step(state, gray, cfg, first=i == 0)
-        if cand is not None and gray is not None:
+        if cand is not None and grid is not None and gray is not None:
             cand, found = _complete(state, gray, cand, grid, uv, cfg)
             if len(found.ids):  # reported in this frame: the candidates around them join
                 cand = grid_candidates(grid.ids, state.ids, cand)

@@ -12,9 +12,10 @@ import numpy as np
 import pandas as pd
 
 from triaxtrack.completion import dot_grid
-from triaxtrack.frames import ProcessedTestFrames, iter_test_frames, read_test_fps
+from triaxtrack.frames import ProcessedTestFrames, iter_test_frames
 from triaxtrack.kit import load_kit_design
 from triaxtrack.tables import FRAME_MAP, LABELS, TRACKS, read_table, write_table
+from triaxtrack.testfolder import read_test_fps
 from triaxtrack.timesteps import tracking_summary
 from triaxtrack.track import TrackingConfig, processed_frames, track_frames
 

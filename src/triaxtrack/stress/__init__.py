@@ -18,7 +18,6 @@ from pathlib import Path
 
 import pandas as pd
 
-from triaxtrack.frames import read_test_yaml
 from triaxtrack.jsonfile import write_json
 from triaxtrack.kit import load_kit_design, target_table
 from triaxtrack.stress.clock import ClockEstimate, estimate_clock_offset, offset_warning
@@ -26,6 +25,7 @@ from triaxtrack.stress.compute import StressConfig, noise_sigma, stress_strain
 from triaxtrack.stress.log import QUANTITIES, read_load_frame_log
 from triaxtrack.stress.sections import SECTION_LEVELS, SECTION_MARGIN, section_areas
 from triaxtrack.tables import POINTS, STRESS_STRAIN, VOLUME_RESULT, conform, read_table, write_table
+from triaxtrack.testfolder import read_test_yaml
 
 
 def measure_stress(
