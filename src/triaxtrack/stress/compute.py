@@ -345,7 +345,6 @@ def stress_strain(
     })  # fmt: skip
     value_cols = [c for c in out.columns if c not in ("frame", "time_s", "log_time_s", "reason")]
     out.loc[(reason != "") & ~inside, value_cols] = np.nan
-    out.attrs["zero_time_s"] = z.t_s
-    out.attrs["load_noise_n"] = float(parts["noise"])
-    out.attrs["load_resolution_n"] = float(parts["resolution"])
+    noise_n, resolution_n = float(parts["noise"]), float(parts["resolution"])
+    out.attrs.update(zero_time_s=z.t_s, load_noise_n=noise_n, load_resolution_n=resolution_n)
     return out
