@@ -346,6 +346,9 @@ def test_a_slow_body_departure_rises_across_the_gop_and_is_pooled_over_cameras()
     )
     assert np.abs(before[p]).max() > 0.006
     assert np.abs(after[p]).max() < 0.002
+    chunks = [tracks[tracks["frame"].between(a, a + 9)] for a in range(0, len(FRAMES), 10)]
+    by_chunk = pd.concat([corrected_tracks(c, lags) for c in chunks]).sort_index()
+    pd.testing.assert_frame_equal(by_chunk, fixed)  # each chunk pools only the keyframes near it
 
 
 def test_a_jitter_common_to_every_camera_is_not_read_as_an_offset():
