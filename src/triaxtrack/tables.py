@@ -166,6 +166,15 @@ RESIDUALS = Schema(
 point; with ``reconstruction.eccentricity``, the reprojection plus the eccentricity of the
 mark's image, :mod:`triaxtrack.eccentricity`), ``used`` whether it entered the solution,
 ``reason`` why not ('' when used)."""
+WATER_RESIDUALS = Schema(
+    "water_residuals",
+    RESIDUALS.columns | {"ix_mm": "float64", "iy_mm": "float64", "iz_mm": "float64"},
+    RESIDUALS.key,
+)
+"""``RESIDUALS`` of the targets in the water (``triaxtrack.triangulate.triangulate_refracted``,
+per chunk of the time steps), with each used observation's influence on its point ``ix_mm,
+iy_mm, iz_mm`` (mm, cell frame; NaN where not used): the point's shift that the observation's
+error, estimated from its leverage-corrected residual, caused (``triaxtrack.influence``)."""
 
 
 TRACKS = Schema(

@@ -38,8 +38,8 @@ from triaxtrack.tables import (
     LABELS,
     OBSERVATIONS,
     POINTS,
-    RESIDUALS,
     TRACKS,
+    WATER_RESIDUALS,
     Schema,
     concat_tables,
     read_table,
@@ -150,7 +150,7 @@ def triangulate_frames(
     ``mark_radius_mm``: the marks' printed radii, for their eccentricity
     (:func:`triaxtrack.triangulate.triangulate_refracted`), computed at every
     ``ECCENTRICITY_EVERY``-th frame and the last and interpolated between. Returns
-    ``(points, residuals)``: ``POINTS`` rows plus ``sigma_mm``, and ``RESIDUALS`` rows (every
+    ``(points, residuals)``: ``POINTS`` rows plus ``sigma_mm``, and ``WATER_RESIDUALS`` rows (every
     observation offered, whether it was used and why not).
     """
     rep = tracks[(tracks["reason"] == "") & tracks["id"].isin(in_water) & tracks["frame"].isin(frames)]
@@ -187,8 +187,7 @@ def triangulate_frames(
     residuals = [solved[f][1] for f in sorted(solved)]
     if not points:
         empty = pd.DataFrame(columns=["frame", "time_s", "id", "x_mm", "y_mm", "z_mm", "n_rays", "rms_px"])
-        return empty, pd.DataFrame(columns=["camera", "frame", "id", "u_px", "v_px", "du_px", "dv_px",
-                                            "used", "reason"])  # fmt: skip
+        return empty, pd.DataFrame(columns=list(WATER_RESIDUALS.columns))
     return pd.concat(points, ignore_index=True), pd.concat(residuals, ignore_index=True)
 
 
@@ -392,8 +391,9 @@ def observations_table(tracks: pd.DataFrame, residuals: pd.DataFrame) -> pd.Data
     (it entered a 3-D point) and ``reason`` (why not; '' when used or not in the water). Where it
     was offered, ``u_px, v_px`` are the pixel the triangulation used (a P frame's membrane dot
     moved by the codec lag, ``triaxtrack.codec_lag``), so that ``u_px + du_px`` is the
-    reprojection; elsewhere the tracked centroid."""
-    res = residuals[["camera", "frame", "id", "u_px", "v_px", "du_px", "dv_px", "used", "reason"]]
+    reprojection; elsewhere the tracked centroid. The influences ``ix_mm, iy_mm, iz_mm``
+    (``WATER_RESIDUALS``) come along where ``residuals`` has them."""
+    res = residuals[[c for c in WATER_RESIDUALS.columns if c in residuals.columns]]
     obs = tracks.loc[tracks["reason"] == "", ["camera", "frame", "id", "u_px", "v_px"]]
     out = obs.merge(res, on=["camera", "frame", "id"], how="left", suffixes=("_tracked", ""))
     for axis in ("u_px", "v_px"):
@@ -447,7 +447,7 @@ def run_triangulate_chunk(
     radii = mark_radii(design, table)
     pts, res = triangulate_frames(posed, tracked, cell, in_water, frames, fps, cfg, moves, poses, radii)
     write_table(pts, points, POINTS)
-    write_table(res, residuals, RESIDUALS)
+    write_table(res, residuals, WATER_RESIDUALS)
     write_table(moves, motion, MOTION)
     print(f"{len(frames)} frames, {len(pts)} points, {int(res['used'].sum())} observations used")
     print(pts.groupby("frame").size().describe().to_string())
@@ -486,7 +486,7 @@ def run_collect_timesteps(
     table = target_table(load_kit_design(kit))
     membrane_ids = table.loc[table["surface"] == "membrane", "id"].to_numpy()
     pts = concat_tables(chunk_points, POINTS)
-    res = concat_tables(chunk_residuals, RESIDUALS)
+    res = concat_tables(chunk_residuals, WATER_RESIDUALS)
     moves = concat_tables(chunk_motion, MOTION)
     tracked = concat_tables(tracks, TRACKS)
     shared = concat_tables(handovers, TRACKS)

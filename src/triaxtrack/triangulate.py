@@ -35,6 +35,7 @@ from scipy.optimize import least_squares
 
 from triaxtrack.cell_frame import transform_points
 from triaxtrack.eccentricity import mark_radii, observation_eccentricity
+from triaxtrack.influence import INFLUENCE_COLUMNS, observation_influence
 from triaxtrack.kit import design_points, load_kit_design, target_table
 from triaxtrack.optics import (
     Camera,
@@ -164,7 +165,7 @@ class WaterTargets:
     """Triangulated targets and the fate of every observation."""
 
     points: pd.DataFrame  # id, x_mm, y_mm, z_mm, n_rays, rms_px, sigma_mm
-    residuals: pd.DataFrame  # the observations with du_px, dv_px, used, reason
+    residuals: pd.DataFrame  # WATER_RESIDUALS: the observations with du_px, dv_px, used, reason, influence
     sigma0_px: float  # a-posteriori image noise (RMS residual, corrected for the 3 unknowns a point)
     eccentricity_px: np.ndarray  # (N, 2) per residuals row: the eccentricity taken off it (or 0)
 
@@ -177,7 +178,8 @@ def _solve(
     mark_radius_mm: pd.Series | None = None,
 ):
     """Intersect and refine every id of ``obs`` (all rows used). Returns ids, group, xyz,
-    residuals, cov and the observations' eccentricities (N, 2; zero without ``mark_radius_mm``).
+    residuals, cov, the observations' eccentricities (N, 2; zero without ``mark_radius_mm``) and
+    their influences on their points (N, 3, mm; :func:`triaxtrack.influence.observation_influence`).
 
     With ``mark_radius_mm`` (printed radius by ID, :func:`triaxtrack.eccentricity.mark_radii`),
     the refined points are corrected for the eccentricity of their marks' images: each
@@ -206,7 +208,7 @@ def _solve(
         step = -np.einsum("mij,mj->mi", np.nan_to_num(cov), Jtr)
         xyz = xyz + step
         r = r + np.einsum("nij,nj->ni", J, step[group])
-    return ids, group, xyz, r, cov, ecc
+    return ids, group, xyz, r, cov, ecc, observation_influence(J, cov, group, r)
 
 
 def triangulate_refracted(
@@ -228,7 +230,9 @@ def triangulate_refracted(
     are corrected for the eccentricity of the marks' images, computed at the points;
     ``eccentricity_px`` (N, 2, one per row of ``observations``) instead gives them (computed at
     other frames, :func:`triaxtrack.timesteps.triangulate_frames`). ``du_px, dv_px`` are then the
-    reprojection plus the eccentricity minus the observation, ``u_px, v_px`` as observed.
+    reprojection plus the eccentricity minus the observation, ``u_px, v_px`` as observed;
+    ``ix_mm, iy_mm, iz_mm`` each used observation's influence on its point
+    (:func:`triaxtrack.influence.observation_influence`; NaN where not used).
     """
     radii = mark_radius_mm if cfg.eccentricity and eccentricity_px is None else None
     keep = observations["camera"].isin(list(cameras)).to_numpy()
@@ -243,6 +247,7 @@ def triangulate_refracted(
     reason = np.full(len(obs), "", object)
     du = np.full(len(obs), np.nan)
     dv = np.full(len(obs), np.nan)
+    influence = np.full((len(obs), 3), np.nan)
     todo = np.ones(len(all_ids), bool)  # points to solve (again): all, then those that lost a ray
     while todo.any():
         few = used & (np.bincount(gid[used], minlength=len(all_ids))[gid] < cfg.min_rays)
@@ -251,7 +256,7 @@ def triangulate_refracted(
         idx = np.flatnonzero(used & todo[gid])
         if idx.size == 0:
             break
-        ids, group, p, r, c, e = _solve(cameras, solve_obs.iloc[idx], cell, cfg, radii)
+        ids, group, p, r, c, e, influence[idx] = _solve(cameras, solve_obs.iloc[idx], cell, cfg, radii)
         ecc[idx] = given[idx] + e
         k = np.searchsorted(all_ids, ids)
         xyz[k], cov[k] = p, c
@@ -279,7 +284,9 @@ def triangulate_refracted(
         "sigma_mm": np.maximum(sigma0, own) * np.sqrt(np.trace(cov, axis1=1, axis2=2)),
     })[solved]  # fmt: skip
     points = points[np.isfinite(points[["x_mm", "y_mm", "z_mm"]]).all(axis=1)].reset_index(drop=True)
-    residuals = obs.assign(du_px=du, dv_px=dv, used=used, reason=reason)
+    influence[~used] = np.nan
+    residuals = obs.assign(du_px=du, dv_px=dv, used=used, reason=reason,
+                           **dict(zip(INFLUENCE_COLUMNS, influence.T, strict=True)))  # fmt: skip
     return WaterTargets(points, residuals, sigma0, ecc)
 
 

@@ -8,6 +8,7 @@ rule measure_volume:
     strains, export the meshes of a few chosen frames as PLY."""
     input:
         points="results/{test}/points.parquet",
+        observations="results/{test}/observations.parquet",
         kit=get_test_kit,
     output:
         volume="results/{test}/volume.parquet",

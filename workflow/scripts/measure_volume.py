@@ -7,7 +7,7 @@ log_to(snakemake.log[0])
 
 i, o = snakemake.input, snakemake.output
 run_measure_volume(
-    points=i.points, kit=i.kit,
+    points=i.points, observations=i.observations, kit=i.kit,
     volume=o.volume, strains=o.strains, meshes=o.meshes,
     volume_cfg=snakemake.params.volume,
 )  # fmt: skip

@@ -64,6 +64,14 @@ def _membrane_layout(table: pd.DataFrame) -> tuple[pd.DataFrame, pd.Series, pd.S
     return mem, z_of_row, th_of_col
 
 
+def grid_ids(table: pd.DataFrame) -> np.ndarray:
+    """(R, C) the kit's membrane dot ID at each index of :class:`MembraneGrid`."""
+    mem, z_of_row, th_of_col = _membrane_layout(table)
+    ids = np.zeros((len(z_of_row), len(th_of_col)), np.int64)
+    ids[mem["i"].to_numpy(), mem["j"].to_numpy()] = mem["id"].to_numpy(np.int64)
+    return ids
+
+
 def kasa_circle(xy: np.ndarray) -> tuple[np.ndarray, float]:
     """Algebraic least-squares circle through (n, 2) points: centre (2,) and radius, mm."""
     a = np.c_[2 * xy, np.ones(len(xy))]

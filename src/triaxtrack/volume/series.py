@@ -9,8 +9,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from triaxtrack.influence import INFLUENCE_COLUMNS
 from triaxtrack.kit import load_kit_design, target_table
-from triaxtrack.tables import POINTS, STRAINS, VOLUME_RESULT, conform, read_table, write_table
+from triaxtrack.tables import OBSERVATIONS, POINTS, STRAINS, VOLUME_RESULT, conform, read_table, write_table
 from triaxtrack.volume.cap import TopCap, top_cap, top_cap_from_membrane
 from triaxtrack.volume.grid import (
     MAX_MISSING_SHARE,
@@ -18,6 +19,7 @@ from triaxtrack.volume.grid import (
     FaceEnds,
     MembraneGrid,
     face_ends,
+    grid_ids,
     membrane_grid,
 )
 from triaxtrack.volume.local import local_strains
@@ -31,7 +33,7 @@ from triaxtrack.volume.mesh import (
     write_ply,
 )
 from triaxtrack.volume.strains import strain_field
-from triaxtrack.volume.uncertainty import VolumeUncertainty, volume_uncertainty
+from triaxtrack.volume.uncertainty import VolumeUncertainty, volume_gradient, volume_uncertainty
 
 FAILURES = (ValueError, np.linalg.LinAlgError)  # what makes one frame fail (NaN and a reason)
 
@@ -66,15 +68,22 @@ def _measure_frame(
     thickness_model: str,
     levels: tuple[int, int],
     check: bool,
+    influence: pd.DataFrame | None = None,
 ) -> tuple[MembraneGrid, TopCap, VolumeResult, VolumeUncertainty, object]:
-    """One frame's (``pf``) filled grid, top cap, soil volume (mm^3), its uncertainty and whether
-    its dot mesh is watertight (<NA> unless ``check``), the membrane thinned from ``t0`` (mm)
-    against the reference grid ``grid0`` (None: this frame is the reference). Raises ``FAILURES``
-    when the frame cannot be measured."""
+    """One frame's (``pf``) filled grid, top cap, soil volume (mm^3), its uncertainty (with the
+    frame's observations' ``influence``, :func:`volume_uncertainty`) and whether its dot mesh is
+    watertight (<NA> unless ``check``), the membrane thinned from ``t0`` (mm) against the
+    reference grid ``grid0`` (None: this frame is the reference). Raises ``FAILURES`` when the
+    frame cannot be measured."""
     grid, cap, ends = frame_grid(pf, table, design, t0, max_missing_share)
     thickness = membrane_thickness(grid, grid if grid0 is None else grid0, t0, model=thickness_model)
     res = specimen_volume(grid, cap, thickness, levels)
-    unc = volume_uncertainty(grid, ends, cap, res.volume_mm3)
+    gradient = None
+    if influence is not None:
+        cap_ids = table.loc[table["surface"] == "pedestal_top", "id"]
+        on_cap = pf.loc[pf["id"].isin(cap_ids)].dropna(subset=["x_mm", "y_mm", "z_mm"])["id"].unique()
+        gradient = volume_gradient(grid, grid_ids(table), cap, on_cap, res.volume_mm3)
+    unc = volume_uncertainty(grid, ends, cap, res.volume_mm3, influence, gradient)
     watertight = check_mesh(*closed_mesh(grid, cap))["watertight"] if check else pd.NA
     return grid, cap, res, unc, watertight
 
@@ -138,6 +147,7 @@ def volume_series(
     check: bool = True,
     thickness_model: str = "area",
     warn_missing_share: float = WARN_MISSING_SHARE,
+    influence: pd.DataFrame | None = None,
 ) -> tuple[pd.DataFrame, pd.DataFrame]:
     """Volume and membrane strains of every frame of ``points`` (columns ``frame, time_s, id,
     x_mm, y_mm, z_mm``, optionally ``sigma_mm``; mm, cell frame).
@@ -151,8 +161,10 @@ def volume_series(
     over the middle third (:func:`~triaxtrack.volume.local.local_strains`, from the measured
     dots only), ``volume_change_mm3 = V - V0``,
     ``volume_sigma_mm3`` the 1-sigma standard uncertainty of ``volume_mm3``
-    (:mod:`triaxtrack.volume.uncertainty`), ``measured_fraction`` the share of membrane dots
-    measured); ``strains`` has the :data:`~triaxtrack.tables.STRAINS` columns for every frame
+    (:mod:`triaxtrack.volume.uncertainty`; with ``influence``, rows ``camera, frame, id, ix_mm,
+    iy_mm, iz_mm`` of the used observations, it counts what each camera's observations share),
+    ``measured_fraction`` the share of membrane dots measured); ``strains`` has the
+    :data:`~triaxtrack.tables.STRAINS` columns for every frame
     that succeeded (filled dots included). Missing dots are filled (:func:`membrane_grid`); a
     frame with more than ``warn_missing_share`` missing gets a ``warning``; one that fails
     (more than ``max_missing_share`` missing, fewer than 3 cap targets, ...) gets NaN values,
@@ -168,6 +180,7 @@ def volume_series(
     strain_parts: list[pd.DataFrame] = []
     ref: tuple[int, MembraneGrid, float, float] | None = None
     ref_points = points.iloc[:0]
+    by_frame = {} if influence is None else dict(tuple(influence.groupby("frame")))
     for frame in frames:
         pf = points[points["frame"] == frame]
         time_s = float(pf["time_s"].iloc[0])
@@ -176,8 +189,9 @@ def volume_series(
         try:
             grid0 = None if ref is None else ref[1]
             grid, cap, res, unc, watertight = _measure_frame(
-                pf, table, design, t0, max_missing_share, grid0, thickness_model, levels, check
-            )
+                pf, table, design, t0, max_missing_share, grid0, thickness_model, levels, check,
+                None if influence is None else by_frame.get(frame, influence.iloc[:0]),
+            )  # fmt: skip
             if ref is None:
                 ref = (int(frame), grid, res.height_mm, res.volume_mm3)
                 ref_points = pf
@@ -240,6 +254,18 @@ def volume_meshes(
         yield int(frame), path, ""
 
 
+def observation_influences(observations: pd.DataFrame) -> pd.DataFrame | None:
+    """The used observations' rows ``camera, frame, id, ix_mm, iy_mm, iz_mm`` of an
+    ``observations.parquet`` table (:data:`~triaxtrack.tables.WATER_RESIDUALS`' influences), None
+    when it has no influences (written before they were)."""
+    cols = list(INFLUENCE_COLUMNS)
+    if not set(cols) <= set(observations.columns):
+        return None
+    used = observations[observations["used"].astype(bool)] if "used" in observations else observations
+    used = used[np.isfinite(used[cols].to_numpy(float)).all(axis=1)]
+    return used[["camera", "frame", "id", *cols]].reset_index(drop=True)
+
+
 def run_measure_volume(
     *,
     points: str | Path,
@@ -248,9 +274,11 @@ def run_measure_volume(
     strains: str | Path,
     meshes: str | Path,
     volume_cfg: dict,
+    observations: str | Path | None = None,
 ) -> None:
     """Rule measure_volume: :func:`volume_series` of every frame of ``points`` with the kit
-    folder ``kit`` (``volume_cfg``: the config's ``volume`` section), written to ``volume`` and
+    folder ``kit`` (``volume_cfg``: the config's ``volume`` section) and the influences of the
+    ``observations`` (``observations.parquet``; :func:`observation_influences`), written to ``volume`` and
     ``strains``; the PLY meshes of ``volume_cfg["mesh_frames"]`` measured frames spread over the
     test in the folder ``meshes`` (:func:`volume_meshes`); prints the meshes, a summary and the
     frames with warnings or failed."""
@@ -260,11 +288,15 @@ def run_measure_volume(
     design = load_kit_design(kit)
     table = target_table(design)
     pts = read_table(points, POINTS)
+    obs = None if observations is None else read_table(observations, OBSERVATIONS)
+    influence = None if obs is None else observation_influences(obs)
+    if influence is None:
+        print("no observation influences: the volume's uncertainty takes the points as independent")
     t0, model = cfg["membrane_thickness_mm"], cfg["thickness_model"]
     share = cfg["max_missing_share"]
     result, strain = volume_series(
         pts, table, design, t0=t0, max_missing_share=share, thickness_model=model,
-        warn_missing_share=cfg["warn_missing_share"],
+        warn_missing_share=cfg["warn_missing_share"], influence=influence,
     )  # fmt: skip
     write_table(result, volume, VOLUME_RESULT)
     write_table(strain, strains, STRAINS)

@@ -1,0 +1,111 @@
+"""Cluster-robust uncertainty with the cameras as clusters (triaxtrack.influence) and the volume's
+derivative by its points (triaxtrack.volume.uncertainty.volume_gradient).
+
+Monte Carlo on a linear camera model with known truth: points seen by 4 of 12 cameras, each
+observation's error a camera's shared part plus its own noise. The cluster estimate must match
+the spread of the statistic over trials when the errors are independent, and stay within 30 %
+of it when the cameras share an error, where the propagation that takes the observations as
+independent falls far short.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from triaxtrack.influence import INFLUENCE_COLUMNS, cluster_sigma, observation_influence
+from triaxtrack.volume import top_cap, volume_series
+from triaxtrack.volume.grid import grid_ids, membrane_grid
+from triaxtrack.volume.uncertainty import volume_gradient
+
+N_POINTS, N_CAMERAS, RAYS, TRIALS = 300, 12, 4, 400
+NOISE_PX, SHARED_PX = 0.05, 0.03
+
+
+def _scene(seed: int = 0):
+    rng = np.random.default_rng(seed)
+    proj = rng.normal(0.0, 2.0, (N_CAMERAS, 2, 3))  # px/mm, each camera's linear projection
+    seen = np.array([rng.choice(N_CAMERAS, RAYS, replace=False) for _ in range(N_POINTS)])
+    cam_of = seen.ravel()
+    group = np.repeat(np.arange(N_POINTS), RAYS)
+    jac = proj[cam_of]
+    grad = rng.normal(1.0, 0.3, (N_POINTS, 3))  # coherent, as a volume's normals are
+    return rng, jac, cam_of, group, grad
+
+
+def _trial(rng, jac, cam_of, group, grad, shared_px: float):
+    """One trial's statistic error, cluster sigma and independent sigma."""
+    shared = rng.normal(0.0, shared_px, (N_CAMERAS, 2))  # one camera's error, in all its rays
+    err = shared[cam_of] + rng.normal(0.0, NOISE_PX, (len(cam_of), 2))
+    jtj = np.zeros((N_POINTS, 3, 3))
+    np.add.at(jtj, group, np.einsum("nki,nkj->nij", jac, jac))
+    cov = np.linalg.inv(jtj)
+    jte = np.zeros((N_POINTS, 3))
+    np.add.at(jte, group, np.einsum("nki,nk->ni", jac, err))
+    dx = np.einsum("mij,mj->mi", cov, jte)  # the least-squares points' errors (truth 0)
+    resid = np.einsum("nij,nj->ni", jac, dx[group]) - err  # reprojection minus observation
+    psi = observation_influence(jac, cov, group, resid)
+    influence = pd.DataFrame(psi, columns=list(INFLUENCE_COLUMNS)).assign(camera=cam_of, id=group)
+    gradient = pd.DataFrame({"id": np.arange(N_POINTS), "gx": grad[:, 0], "gy": grad[:, 1], "gz": grad[:, 2]})
+    sigma, n = cluster_sigma(influence, gradient)
+    sig0 = np.sqrt(np.einsum("mi,mij,mj->", grad, cov, grad)) * np.sqrt(NOISE_PX**2 + shared_px**2)
+    return float(np.sum(grad * dx)), sigma, n, sig0
+
+
+@pytest.mark.parametrize("shared_px", [0.0, SHARED_PX])
+def test_cluster_sigma_matches_the_spread_over_trials(shared_px):
+    rng, jac, cam_of, group, grad = _scene()
+    runs = np.array([_trial(rng, jac, cam_of, group, grad, shared_px)[:4] for _ in range(TRIALS)])
+    spread = runs[:, 0].std()
+    cluster = np.sqrt(np.mean(runs[:, 1] ** 2))
+    independent = np.mean(runs[:, 3])
+    print(
+        f"\nshared {shared_px} px: spread {spread:.4f}, cluster {cluster:.4f}, independent {independent:.4f}"
+    )
+    assert set(runs[:, 2]) == {N_CAMERAS}
+    if shared_px:
+        # a point follows 1/4 of each of its 4 cameras' shared errors, which no residual shows
+        assert 0.7 * spread < cluster < 1.1 * spread
+        assert independent < 0.6 * spread  # the shared part is what the independent model misses
+    else:
+        assert cluster == pytest.approx(spread, rel=0.1)
+        assert independent == pytest.approx(spread, rel=0.1)
+
+
+def test_influence_is_nan_without_a_point_and_cluster_sigma_without_overlap():
+    jac = np.ones((2, 2, 3))
+    cov = np.stack([np.eye(3), np.full((3, 3), np.nan)])
+    psi = observation_influence(jac, cov, np.array([0, 1]), np.zeros((2, 2)))
+    assert np.isfinite(psi[0]).all() and np.isnan(psi[1]).all()
+    influence = pd.DataFrame(psi, columns=list(INFLUENCE_COLUMNS)).assign(camera="cam01", id=[1, 2])
+    sigma, n = cluster_sigma(influence, pd.DataFrame({"id": [7], "gx": [1.0], "gy": [0.0], "gz": [0.0]}))
+    assert np.isnan(sigma) and n == 0
+
+
+def test_volume_gradient_is_the_volumes_derivative(design, table):
+    """Moving the membrane dots out by a few micrometres each (varying from dot to dot) and the
+    top cap up changes the measured volume by the gradient's dot product with the shifts (within
+    2 %)."""
+    from tests.test_volume import LOADED, frame_points
+
+    pts = frame_points(design, table, LOADED, 0.5)
+    rng = np.random.default_rng(3)
+    xyz = pts[["x_mm", "y_mm", "z_mm"]].to_numpy()
+    out = np.c_[xyz[:, :2] / np.hypot(xyz[:, 0], xyz[:, 1])[:, None], np.zeros(len(xyz))]
+    on_membrane = pts["id"].isin(table.loc[table["surface"] == "membrane", "id"]).to_numpy()
+    shift = np.where(on_membrane[:, None], out * rng.uniform(0.0, 0.008, (len(xyz), 1)), [0.0, 0.0, 0.01])
+    moved = pts.assign(
+        x_mm=pts["x_mm"] + shift[:, 0], y_mm=pts["y_mm"] + shift[:, 1], z_mm=pts["z_mm"] + shift[:, 2]
+    )
+    frames = pd.concat([pts.assign(frame=0), moved.assign(frame=1)]).assign(time_s=0.0)
+    vol, _ = volume_series(frames, table, design, check=False)
+    v0 = float(vol["volume_mm3"].iloc[0])
+    cap = top_cap(pts, table, design)
+    on_cap = table.loc[table["surface"] == "pedestal_top", "id"].to_numpy()
+    grad = volume_gradient(membrane_grid(pts, table), grid_ids(table), cap, on_cap, v0).set_index("id")
+    predicted = float(np.sum(grad.loc[pts["id"]].to_numpy() * shift))
+    change = float(vol["volume_mm3"].iloc[1]) - v0
+    print(f"\nvolume change {change:.3f} mm3, predicted {predicted:.3f} mm3")
+    assert predicted > 100.0
+    assert change == pytest.approx(predicted, rel=0.02)
