@@ -128,7 +128,6 @@ def tracks_table(layout: MembraneLayout) -> pd.DataFrame:
     return conform(df, TRACKS)
 
 
-
 @pytest.fixture(scope="module")
 def layout(design):
     return membrane_layout(design)
