@@ -66,8 +66,9 @@ standard errors ``local_axial_sigma``, ``local_radial_sigma`` (``triaxtrack.volu
 bedding errors at the ends: the gauge length of a local transducer);
 ``volume_change_mm3 = V - V0``, the volume's parts
 ``mesh_volume_mm3, chordal_mm3, membrane_mm3``; ``volume_sigma_mm3`` the 1-sigma standard
-uncertainty of ``volume_mm3`` (mm^3: the measured dots' noise, the fill's leave-out error and the
-top face's height, in quadrature; NaN when the fill's part cannot be estimated);
+uncertainty of ``volume_mm3`` (mm^3: the measured dots' and the top cap's errors, each camera's
+observations taken as sharing theirs, and the fill's leave-out error, in quadrature; NaN when the
+fill's part cannot be estimated; ``triaxtrack.volume.uncertainty``);
 ``measured_fraction`` the share (0-1) of the membrane's dots measured in the frame, each dot
 standing for the same design area (known for failed frames too); ``filled_dots`` the dots
 filled; ``watertight`` Open3D's check of the dot mesh; ``reference_frame`` the frame the strains

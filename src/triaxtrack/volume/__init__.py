@@ -44,8 +44,9 @@ z, so every mesh's end rings lie exactly on the faces (a tilted top cap is handl
 columns are assumed evenly spaced in theta (as the kit prints them).
 
 Each volume carries its 1-sigma standard uncertainty ``volume_sigma_mm3`` (mm^3): the measured
-dots' noise, the fill's error by a leave-out check of the gaps on measured dots, the top face's
-height, in quadrature (:mod:`triaxtrack.volume.uncertainty`), and the
+dots' and the top cap's errors (with the observations' influences, cameras as clusters: what
+one camera's observations share counts in full) and the fill's error by a leave-out check of
+the gaps on measured dots, in quadrature (:mod:`triaxtrack.volume.uncertainty`), and the
 ``measured_fraction`` of the membrane's dots.
 
 Modules: :mod:`~triaxtrack.volume.grid` (the grid and its fill), :mod:`~triaxtrack.volume.cap`,
