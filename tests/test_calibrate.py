@@ -356,7 +356,7 @@ def test_config_is_checked():
         CalibrationConfig.from_dict({"model": "fisheye"})
     with pytest.raises(ValueError, match="passes"):
         CalibrationConfig.from_dict({"passes": 3})
-    with pytest.raises(ValueError, match="unknown calibration settings"):
+    with pytest.raises(ValueError, match=r"calibration: unknown key 'min_image' \(did you mean 'min_images'"):
         CalibrationConfig.from_dict({"min_image": 3})
 
 

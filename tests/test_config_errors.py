@@ -1,14 +1,20 @@
 """Errors a user can act on: config and test.yaml problems name the file, the key and a near miss
-(never the schema); unknown test.yaml keys are warned about; a failed job's reason reaches the
-console (the Snakefile's `onerror`)."""
+(never the schema); unknown test.yaml keys are warned about; the package's config sections
+(``from_dict``) refuse unknown keys by one rule and take their defaults from the dataclasses; a
+failed job's reason reaches the console (the Snakefile's `onerror`)."""
 
 from __future__ import annotations
 
 import copy
+import re
 
+import pytest
 import yaml
+from snakemake.utils import update_config
 from test_workflow import REPO, run_snakemake, workflow_copy
 
+from triaxtrack.calibrate import CalibrationConfig
+from triaxtrack.config_section import field_names, section_dict
 from triaxtrack.errors import (
     did_you_mean,
     failed_jobs,
@@ -17,6 +23,12 @@ from triaxtrack.errors import (
     schema_problems,
     unknown_top_level_keys,
 )
+from triaxtrack.reconstruction_config import SfmConfig, TriangulationConfig
+from triaxtrack.score import ScoreTolerances
+from triaxtrack.simulate import SimulationConfig
+from triaxtrack.simulate.loadlog import LoadFrameSimulation
+from triaxtrack.stress import StressConfig
+from triaxtrack.tracking_config import TrackingConfig
 
 CONFIG_SCHEMA = yaml.safe_load((REPO / "workflow" / "schemas" / "config.schema.yaml").read_text())
 TEST_SCHEMA = yaml.safe_load((REPO / "workflow" / "schemas" / "test.schema.yaml").read_text())
@@ -81,6 +93,143 @@ def test_test_yaml_problems_and_unknown_top_level_keys():
     assert schema_problems({"name": "t", "cameras": ["a"]}, TEST_SCHEMA, [("t.yaml", {})]) == [
         "t.yaml: the top level: 'fps' is a required property"
     ]
+
+
+# ---------------------------------------------------------------- config sections -> dataclasses
+
+#: Each config section the package reads through dataclasses, and the dataclasses it feeds
+#: (``simulation`` is also each simulated test's ``simulate``, on top of it).
+SECTIONS = {
+    "calibration": (CalibrationConfig,),
+    "reconstruction": (SfmConfig, TriangulationConfig),
+    "tracking": (TrackingConfig,),
+    "stress": (StressConfig,),
+    "score": (ScoreTolerances,),
+    "simulation": (SimulationConfig,),
+    "simulation.load_frame": (LoadFrameSimulation,),
+}
+#: dataclass fields the config does not expose (settable from Python only)
+NOT_IN_CONFIG = {"tracking": {"ink_fraction"}}  # the detector's ink threshold (DetectParams)
+BUILDERS = [(section, cls) for section, classes in SECTIONS.items() for cls in classes]
+IDS = [f"{section}-{cls.__name__}" for section, cls in BUILDERS]
+
+
+def refused(message: str):
+    """pytest.raises(ValueError) whose message starts with ``message`` (taken literally)."""
+    return pytest.raises(ValueError, match=f"^{re.escape(message)}")
+
+
+def schema_section(section: str) -> dict:
+    """The schema of a config section (``simulation`` and its ``load_frame``: the definition
+    shared with each test's ``simulate``)."""
+    if section == "simulation":
+        return CONFIG_SCHEMA["$defs"]["simulation"]
+    if section == "simulation.load_frame":
+        return CONFIG_SCHEMA["$defs"]["simulation"]["properties"]["load_frame"]
+    return CONFIG_SCHEMA["properties"][section]
+
+
+@pytest.mark.parametrize(("section", "cls"), BUILDERS, ids=IDS)
+def test_an_unknown_key_in_a_section_is_an_error_naming_section_key_and_known_keys(section, cls):
+    known = field_names(*SECTIONS[section]) + (("preset",) if cls is SimulationConfig else ())
+    with pytest.raises(ValueError) as refusal:
+        cls.from_dict({"colour": 1})
+    assert str(refusal.value) == f"{section}: unknown key 'colour'; known keys: {', '.join(sorted(known))}"
+    with refused(f"{section}: must be a mapping of settings, not 3"):
+        cls.from_dict(3)
+
+
+def test_a_near_miss_is_named_with_the_key_meant_and_every_unknown_key_is_listed():
+    with refused("tracking: unknown keys 'gates' (did you mean 'gate'?), 'x'; known keys: codec_lag,"):
+        TrackingConfig.from_dict({"gates": 0.2, "x": 1, "gate": 0.3})
+    with refused("stress: unknown key 'search' (did you mean 'search_s'?)"):
+        StressConfig.from_dict({"search": [0, 1]})
+    with refused("score: unknown key 'volume_rels' (did you mean 'volume_rel'?)"):
+        ScoreTolerances.from_dict({"volume_rels": 0.01})
+    with refused("simulation.load_frame: unknown key 'rate' (did you mean 'rate_hz'?)"):
+        LoadFrameSimulation.from_dict({"rate": 5.0})
+    with refused("simulation: unknown key 'camera' (did you mean 'cameras'?)"):
+        SimulationConfig.from_dict({"preset": "nvr", "camera": 4})
+
+
+def test_the_reconstruction_section_feeds_sfm_and_triangulation_each_taking_its_own_keys():
+    section = {"ransac_px": 3.0, "min_targets": 9, "min_rays": 3, "iterations": 5, "max_residual_px": 0.7}
+    sfm, tri = SfmConfig.from_dict(section), TriangulationConfig.from_dict(section)
+    assert (sfm.ransac_px, sfm.min_targets, sfm.max_residual_px) == (3.0, 9, 0.7)
+    assert (tri.min_rays, tri.iterations, tri.max_residual_px) == (3, 5, 0.7)  # a shared key: both
+    assert SfmConfig.from_dict({"refine_cell": True}) == SfmConfig()  # TriangulationConfig's key
+    assert TriangulationConfig.from_dict({"pose_from_water": False}) == TriangulationConfig()  # SfmConfig's
+    for cls in (SfmConfig, TriangulationConfig):  # a key neither reads is refused by both
+        with refused("reconstruction: unknown key 'ransac' (did you mean 'ransac_px'?)"):
+            cls.from_dict({**section, "ransac": 2.0})
+    # the pipeline's use: every stage is handed the whole section of config/config.yaml
+    assert SfmConfig.from_dict(DEFAULTS["reconstruction"]) == SfmConfig()
+    assert TriangulationConfig.from_dict(DEFAULTS["reconstruction"]) == TriangulationConfig()
+
+
+@pytest.mark.parametrize(("section", "cls"), BUILDERS, ids=IDS)
+def test_the_defaults_are_the_dataclasses_and_config_yaml_writes_them_out(section, cls):
+    """A key left out (or the whole section: None) takes the field's default; config.yaml's own
+    values (every key written out for the reader) are those defaults, so the two cannot drift."""
+    assert cls.from_dict({}) == cls() and cls.from_dict(None) == cls()
+    top, _, sub = section.partition(".")
+    written = DEFAULTS[top].get(sub, {}) if sub else DEFAULTS[top]
+    assert cls.from_dict(written) == cls(), f"config/config.yaml `{section}`: not {cls.__name__}'s defaults"
+
+
+def test_none_is_a_value_not_the_default():
+    """null in a config file means "none" (or "the kit's") for fields whose default is None;
+    it is passed as given, never replaced by a default, and valid configs write it nowhere else."""
+    assert TrackingConfig.from_dict({"step_s": None}).step_s is None
+    assert TrackingConfig.from_dict({"step_s": 2.0}).step_s == 2.0
+    assert TrackingConfig.from_dict({"gate": None}).gate is None  # the workflow's schema refuses it first
+    assert StressConfig.from_dict({"search_s": None, "zero_time_s": None}) == StressConfig()
+    assert StressConfig.from_dict({"search_s": [-1, 2]}).search_s == (-1.0, 2.0)  # per-class casting kept
+    assert ScoreTolerances.from_dict({"wrong_ids": 0}).wrong_ids == 0.0
+    assert section_dict(None, "score", ["a"]) == {}
+
+
+@pytest.mark.parametrize("section", sorted(SECTIONS))
+def test_the_schema_and_the_dataclasses_know_the_same_keys(section):
+    """The workflow validates config.yaml against the schema when it loads; the package's
+    from_dict refuses what the dataclasses do not know: the two agree key for key."""
+    schema = schema_section(section)
+    assert schema.get("additionalProperties") is False, f"`{section}` takes any key in the schema"
+    fields = set(field_names(*SECTIONS[section])) - NOT_IN_CONFIG.get(section, set())
+    assert set(schema["properties"]) == fields
+
+
+@pytest.mark.parametrize("section", ["volume", "cell", "report"])
+def test_a_section_without_a_dataclass_is_checked_by_the_schema(section):
+    """``volume``, ``cell`` and ``report`` are read as plain mappings: an unknown key is refused
+    by the schema when the workflow loads (no dataclass refuses it later)."""
+    mine = {section: {**DEFAULTS[section], "colour": 1}}
+    problems = schema_problems(merged(**mine), CONFIG_SCHEMA, [("my.yaml", mine)])
+    assert len(problems) == 1
+    assert problems[0].startswith(f"my.yaml: `{section}.colour`: unknown key 'colour' (known keys: ")
+
+
+CONFIG_FILES = sorted(path.name for path in (REPO / "config").glob("*.yaml") if path.name != "kit.yaml")
+
+
+@pytest.mark.parametrize("name", CONFIG_FILES)
+def test_every_config_file_loads_through_the_schema_and_the_from_dicts(name):
+    """Each config/*.yaml on top of config/config.yaml, merged as Snakemake merges a
+    --configfile (mappings key by key): valid against the schema, and every section and every
+    simulated test builds its dataclasses."""
+    config = copy.deepcopy(DEFAULTS)
+    own = yaml.safe_load((REPO / "config" / name).read_text()) or {}
+    update_config(config, copy.deepcopy(own))
+    sources = [("config/config.yaml", DEFAULTS), (f"config/{name}", own)]
+    assert schema_problems(config, CONFIG_SCHEMA, sources) == []
+    for section, classes in SECTIONS.items():
+        if "." not in section:
+            for cls in classes:
+                cls.from_dict(config.get(section))
+    for test in config["tests"]:
+        if "simulate" in test:
+            sim = SimulationConfig.from_dict({**config["simulation"], **test["simulate"]})
+            LoadFrameSimulation.from_dict(sim.load_frame)
 
 
 # ---------------------------------------------------------------- failed jobs

@@ -112,7 +112,7 @@ def test_check_simulation_passes(small_test):
 
 
 def test_unknown_setting_is_refused():
-    with pytest.raises(ValueError, match="unknown simulation settings"):
+    with pytest.raises(ValueError, match="simulation: unknown key .camreas."):
         SimulationConfig.from_dict({"camreas": 13})
 
 

@@ -105,7 +105,11 @@ def _score(args: argparse.Namespace) -> int:
 
     tol = ScoreTolerances()
     if args.config:
-        tol = ScoreTolerances.from_dict(yaml.safe_load(Path(args.config).read_text()).get("score"))
+        try:  # an unknown key in its `score` section is an error naming the file and the key
+            tol = ScoreTolerances.from_dict(yaml.safe_load(Path(args.config).read_text()).get("score"))
+        except ValueError as err:
+            print(f"triaxtrack score: {args.config}: {err}", file=sys.stderr)
+            return 2
     try:
         df = score(args.results_dir, args.truth_dir, tol)
     except ValueError as err:

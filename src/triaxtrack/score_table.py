@@ -3,9 +3,13 @@ tolerances (config ``score``: :class:`ScoreTolerances`) and one row (:func:`_met
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
+
+from triaxtrack.config_section import field_names, section_dict
 
 COLUMNS = ["metric", "item", "value", "tolerance", "unit", "passed", "source"]
 AT_LEAST = {"membrane_3_rays"}  # per-frame metrics whose tolerance is a minimum
@@ -38,10 +42,10 @@ class ScoreTolerances:
     q_abs_kpa: float = 1.0  # |q - q_true| on the mean area elsewhere, kPa
 
     @staticmethod
-    def from_dict(d: dict | None) -> ScoreTolerances:
-        d = dict(d or {})
-        known = {f.name for f in fields(ScoreTolerances)}
-        return ScoreTolerances(**{k: float(v) for k, v in d.items() if k in known})
+    def from_dict(d: Mapping[str, Any] | None) -> ScoreTolerances:
+        """From the config's ``score`` section (ValueError naming an unknown key), as floats."""
+        items = section_dict(d, "score", field_names(ScoreTolerances))
+        return ScoreTolerances(**{key: float(value) for key, value in items.items()})
 
 
 def _metric(

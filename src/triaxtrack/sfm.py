@@ -34,7 +34,7 @@ way in and out.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, fields, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import pandas as pd
@@ -42,6 +42,7 @@ import pandas as pd
 from triaxtrack.cell_frame import Cylinder, axis_frame, fit_cylinder, similarity_transform, transform_points
 from triaxtrack.eccentricity import observation_eccentricity
 from triaxtrack.optics import Camera, CellOptics, project_air
+from triaxtrack.reconstruction_config import SfmConfig
 from triaxtrack.refractive_pose import PoseObservations, pnp_pose, pose_camera
 
 COLMAP_PIXEL_OFFSET = 0.5  # COLMAP puts the centre of the top-left pixel at (0.5, 0.5)
@@ -57,34 +58,6 @@ MAX_SCALE_ERROR = 0.01
 MAX_AXIS_TILT_DEG = 1.0
 NOMINAL_RADIUS_SIGMA_MM = 0.5  # standard error of a nominal outer radius (tube tolerance), the
 # prior of triaxtrack.triangulate.refine_cell when the radius was not fitted in air
-
-
-@dataclass(frozen=True)
-class SfmConfig:
-    """Settings of the cameras-and-cell reconstruction (config ``reconstruction``).
-
-    ``ransac_px``: PnP inlier threshold; ``max_residual_px``: an observation whose residual after
-    the bundle adjustment exceeds this is dropped (and the adjustment run again);
-    ``min_targets``: a camera with fewer cell-wall targets (after PnP) is posed from the targets
-    in the water, and one with fewer targets of any kind is left out, with the reason;
-    ``pose_from_water``: pose such cameras through the wall (False: leave them out);
-    ``refine_intrinsics``: let the bundle adjustment refine focal lengths, principal
-    point and distortion (by default they stay as calibrated); ``eccentricity``: correct the
-    cell-wall observations for the eccentricity of the marks' images
-    (:mod:`triaxtrack.eccentricity`).
-    """
-
-    ransac_px: float = 2.0
-    max_residual_px: float = 1.0
-    min_targets: int = 12
-    refine_intrinsics: bool = False
-    pose_from_water: bool = True
-    eccentricity: bool = True
-
-    @staticmethod
-    def from_dict(d: dict | None) -> SfmConfig:
-        known = {f.name for f in fields(SfmConfig)}
-        return SfmConfig(**{k: v for k, v in (d or {}).items() if k in known})
 
 
 @dataclass(frozen=True)

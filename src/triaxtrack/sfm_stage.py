@@ -11,7 +11,8 @@ from triaxtrack.calibrate.files import calibrated_camera
 from triaxtrack.eccentricity import mark_radii
 from triaxtrack.kit import design_points, load_kit_design, target_table
 from triaxtrack.optics import configured_cell
-from triaxtrack.sfm import SfmConfig, cell_summary, reconstruct_cell
+from triaxtrack.reconstruction_config import SfmConfig
+from triaxtrack.sfm import cell_summary, reconstruct_cell
 from triaxtrack.tables import LABELS, POINTS, RESIDUALS, read_table, write_table
 from triaxtrack.testfolder import read_calibration, write_cell
 

@@ -33,6 +33,7 @@ from triaxtrack.eccentricity import mark_radii
 from triaxtrack.jsonfile import write_json
 from triaxtrack.kit import load_kit_design, target_table
 from triaxtrack.optics import Camera, CellOptics, project_air, read_cameras
+from triaxtrack.reconstruction_config import SfmConfig, TriangulationConfig
 from triaxtrack.refractive_pose import pnp_pose
 from triaxtrack.tables import (
     LABELS,
@@ -46,16 +47,19 @@ from triaxtrack.tables import (
     write_table,
 )
 from triaxtrack.testfolder import read_quality, read_test_fps
-from triaxtrack.triangulate import TriangulationConfig, quality_cell, triangulate_refracted
+from triaxtrack.tracking_config import TrackingConfig
+from triaxtrack.triangulate import quality_cell, triangulate_refracted
 
-MOVED_PX = 0.3  # default: a camera whose cell-wall targets drift by more (median) has moved
 MIN_WALL_TARGETS = 5  # fewer tracked cell-wall targets in a frame: the camera cannot be checked
 MIN_REPOSE_TARGETS = 12  # cell-wall targets a moved camera is posed again from (as the first frame's PnP)
-REPOSE_RANSAC_PX = 2.0  # PnP inlier threshold, pixels (reconstruction.ransac_px's default)
+REPOSE_RANSAC_PX = SfmConfig.ransac_px  # PnP inlier threshold, pixels (reconstruction.ransac_px's default)
 
 
 def camera_motion(
-    cameras: dict[str, Camera], wall_points: pd.DataFrame, tracks: pd.DataFrame, moved_px: float = MOVED_PX
+    cameras: dict[str, Camera],
+    wall_points: pd.DataFrame,
+    tracks: pd.DataFrame,
+    moved_px: float = TrackingConfig.moved_px,
 ) -> tuple[pd.DataFrame, dict[tuple[str, int], Camera]]:
     """Per camera and frame: the median distance (pixels) of the tracked cell-wall targets from
     the projections of their first-frame points, whether the camera has moved, and whether it
@@ -369,7 +373,9 @@ def timestep_quality(
     }
 
 
-def handover_checks(shared: pd.DataFrame, labels: pd.DataFrame, tol_px: float = 1.0) -> list[dict]:
+def handover_checks(
+    shared: pd.DataFrame, labels: pd.DataFrame, tol_px: float = TrackingConfig.handover_px
+) -> list[dict]:
     """:func:`handover_check` of every camera at every frame in ``shared`` (``TRACKS`` rows the
     chunks carried to their next chunk's first frame) against ``labels`` (``LABELS`` of the
     chunk starts). A camera whose next labels are of a later frame is listed, not compared."""
@@ -439,7 +445,7 @@ def run_triangulate_chunk(
         tracked = corrected_tracks(tracked, read_lag_files(lags))
     first = read_table(reference_points, POINTS)
     wall = first[first["id"].isin(table.loc[table["surface"] == "cell_outer", "id"])]
-    moved_px = tracking_cfg["moved_px"]
+    moved_px = TrackingConfig.from_dict(tracking_cfg).moved_px
     moves, poses = camera_motion(posed, wall, tracked, moved_px)
     in_water = table.loc[table["surface"] != "cell_outer", "id"].to_numpy()
     frames = np.unique(tracked["frame"].to_numpy())

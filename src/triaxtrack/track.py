@@ -70,16 +70,16 @@ test frames (``triaxtrack.frames``).
 from __future__ import annotations
 
 from collections.abc import Collection, Iterable
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
 from scipy.spatial import cKDTree
 
 from triaxtrack.completion import Candidates, DotGrid, Found, complete_grid, grid_candidates
-from triaxtrack.detect import DetectParams
 from triaxtrack.nearest import crowded
 from triaxtrack.neighbour_motion import affine_flow, reference_places, unwrap_motion
+from triaxtrack.tracking_config import TrackingConfig
 from triaxtrack.window import WindowMeasure, measure_windows
 
 REFERENCE_WIDTH = 3.0  # x spacing: the width of the displacement field that places a dot taken on
@@ -103,25 +103,6 @@ REASONS = (
     "edge", "lost", "merged", "shape", "jump", "ambiguous", "drift", "unconfirmed", "disagrees",
     "not_recorded",
 )  # fmt: skip
-
-
-@dataclass(frozen=True)
-class TrackingConfig:
-    """Settings of :func:`track_frames` (config section ``tracking``)."""
-
-    step_s: float | None = None  # processed frames: every frame (None) or one every step_s seconds
-    gate: float = 0.3  # max centroid shift from the prediction, x distance to the nearest detection
-    min_separation: float = 0.5  # two targets closer than this x that distance: ambiguous
-    mass_change: float = 0.25  # max relative change of a blob's mass from the chunk's first frame
-    mass_step: float = 0.1  # max relative change of a blob's mass from the frame it was last seen
-    max_flow_residual_px: float = 0.5  # max departure from the neighbours' affine motion, pixels
-    disc_margin_px: float = 1.0  # the blob's disc: its semi-major axis plus this, pixels
-    ink_fraction: float = DetectParams.ink_fraction  # ink: darker than ink_fraction x the white level
-
-    @staticmethod
-    def from_dict(d: dict | None) -> TrackingConfig:
-        names = {f.name for f in fields(TrackingConfig)}
-        return TrackingConfig(**{k: v for k, v in (d or {}).items() if k in names and v is not None})
 
 
 def processed_frames(n_frames: int, fps: float, step_s: float | None) -> np.ndarray:

@@ -17,7 +17,8 @@ from triaxtrack.kit import load_kit_design
 from triaxtrack.tables import FRAME_MAP, LABELS, TRACKS, read_table, write_table
 from triaxtrack.testfolder import read_test_fps
 from triaxtrack.timesteps import tracking_summary
-from triaxtrack.track import TrackingConfig, processed_frames, track_frames
+from triaxtrack.track import processed_frames, track_frames
+from triaxtrack.tracking_config import TrackingConfig
 
 
 @dataclass(frozen=True)
@@ -81,12 +82,12 @@ def run_track_targets(
     fmap = read_table(frames, FRAME_MAP)
     labelled = read_table(labels, LABELS)
     plan = chunk_frames(labelled, fmap, read_test_fps(test_yaml), chunk, cfg, str(labels))
-    fast = cfg.step_s is not None and tracking_cfg["fast"]
+    fast = cfg.step_s is not None and cfg.fast
     # fast: decode only the processed frames; follow the targets across the others
     sparse = ProcessedTestFrames(video, fmap, plan.first, plan.end, plan.report) if fast else None
     images = sparse if sparse is not None else iter_test_frames(video, fmap, plan.first, plan.end)
     t0 = time.perf_counter()
-    grid = dot_grid(load_kit_design(kit)) if tracking_cfg["complete_grid"] else None
+    grid = dot_grid(load_kit_design(kit)) if cfg.complete_grid else None
     tracked = track_frames(images, labelled, camera, plan.report, cfg, grid)
     seconds = time.perf_counter() - t0
     mode = "every frame decoded"

@@ -25,7 +25,7 @@ Millimetres in the (axis-aligned) cell frame; pixels in OpenCV convention.
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass, fields, replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -47,6 +47,7 @@ from triaxtrack.optics import (
     trace_into_water,
     write_cameras,
 )
+from triaxtrack.reconstruction_config import TriangulationConfig
 from triaxtrack.sfm import REFERENCE_FRAME
 from triaxtrack.tables import LABELS, OBSERVATIONS, POINTS, RESIDUALS, read_table, write_table
 from triaxtrack.testfolder import read_cell, read_test_fps, write_quality
@@ -54,31 +55,6 @@ from triaxtrack.testfolder import read_cell, read_test_fps, write_quality
 FD_STEP_MM = 1e-4  # finite-difference step of the point Jacobians (the projection is exact to ~1e-8 px)
 REFINE_CELL_STEPS = (0.01, 0.01, 1e-4)  # finite-difference steps: outer radius mm, wall mm, n_water
 UNPROJECTED_PX = 10.0  # residual counted for an observation whose point no longer projects
-
-
-@dataclass(frozen=True)
-class TriangulationConfig:
-    """Settings of the ray tracing (config ``reconstruction``).
-
-    ``min_rays``: a point needs this many observations after outlier removal;
-    ``max_residual_px``: observations above this residual are dropped, the worst of a point
-    first; ``iterations``: Gauss-Newton steps on the reprojection error;
-    ``refine_cell``: run :func:`refine_cell`; ``refine_cell_points``: how many points (spread
-    over the IDs) it uses; ``eccentricity``: correct the observations of round marks for the
-    eccentricity of their images (:mod:`triaxtrack.eccentricity`).
-    """
-
-    min_rays: int = 2
-    max_residual_px: float = 1.0
-    iterations: int = 3
-    refine_cell: bool = False
-    refine_cell_points: int = 600
-    eccentricity: bool = True
-
-    @staticmethod
-    def from_dict(d: dict | None) -> TriangulationConfig:
-        known = {f.name for f in fields(TriangulationConfig)}
-        return TriangulationConfig(**{k: v for k, v in (d or {}).items() if k in known})
 
 
 def water_rays(camera: Camera, uv_px: np.ndarray, cell: CellOptics) -> tuple[np.ndarray, np.ndarray]:

@@ -3,9 +3,13 @@ cannot be calibrated raises."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
 
 import cv2
+
+from triaxtrack.config_section import section_from_dict
 
 #: calibration models: name -> (cv2.calibrateCamera flags, number of distortion coefficients)
 MODELS: dict[str, tuple[int, int]] = {
@@ -39,10 +43,7 @@ class CalibrationConfig:
             raise ValueError(f"calibration passes must be 1 or 2, not {self.passes}")
 
     @staticmethod
-    def from_dict(d: dict | None) -> CalibrationConfig:
-        d = dict(d or {})
-        known = {f.name for f in fields(CalibrationConfig)}
-        unknown = set(d) - known
-        if unknown:
-            raise ValueError(f"unknown calibration settings: {sorted(unknown)}; known: {sorted(known)}")
-        return CalibrationConfig(**d)
+    def from_dict(d: Mapping[str, Any] | None) -> CalibrationConfig:
+        """From the config's ``calibration`` section (ValueError naming an unknown key or a
+        value out of range)."""
+        return section_from_dict(CalibrationConfig, d, "calibration")

@@ -3,9 +3,13 @@ simulated camera records."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, fields
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
+
+from triaxtrack.config_section import field_names, section_dict
 
 VIGNETTING = 0.22  # default relative fall-off of light at the image corners
 MAX_TILT_DEG = 30.0  # largest camera_tilt_deg accepted (the specimen leaves the picture well before)
@@ -59,20 +63,14 @@ class SimulationConfig:
     dropped_frames: dict[str, list[int]] = field(default_factory=dict)
 
     @staticmethod
-    def from_dict(d: dict) -> SimulationConfig:
+    def from_dict(d: Mapping[str, Any] | None) -> SimulationConfig:
         """Settings from a mapping of field names (config files, the CLI, scene.json).
 
         The extra key ``preset`` (``clean`` or ``nvr``, see ``PRESETS``) fills in a set of keys
         first; keys given explicitly in ``d`` override it. ValueError naming the key for an
         unknown key or preset, or a value out of range.
         """
-        d = apply_preset(d)
-        known = {f.name for f in fields(SimulationConfig)}
-        unknown = set(d) - known
-        if unknown:
-            raise ValueError(
-                f"unknown simulation settings: {sorted(unknown)}; known: {sorted(known | {'preset'})}"
-            )
+        d = apply_preset(section_dict(d, "simulation", (*field_names(SimulationConfig), "preset")))
         if d.get("occluder_z_mm") is not None:
             z = d["occluder_z_mm"]
             if isinstance(z, (str, bytes)) or not hasattr(z, "__len__") or len(z) != 2:

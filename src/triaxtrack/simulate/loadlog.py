@@ -31,12 +31,15 @@ frame hold the undeformed specimen, after the last the final state.
 from __future__ import annotations
 
 import json
-from dataclasses import asdict, dataclass, fields
+from collections.abc import Mapping
+from dataclasses import asdict, dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
 
+from triaxtrack.config_section import section_from_dict
 from triaxtrack.deformation import Deformation
 from triaxtrack.simulate.config import SimulationConfig, loading_progress
 from triaxtrack.stress.sections import SECTION_LEVELS, SECTION_MARGIN, section_heights
@@ -78,14 +81,10 @@ class LoadFrameSimulation:
     noise_volume_mm3: float = 5.0
 
     @staticmethod
-    def from_dict(d: dict) -> LoadFrameSimulation:
+    def from_dict(d: Mapping[str, Any] | None) -> LoadFrameSimulation:
         """Settings from ``SimulationConfig.load_frame`` (ValueError naming an unknown key or a
         non-positive rate)."""
-        known = {f.name for f in fields(LoadFrameSimulation)}
-        unknown = set(d) - known
-        if unknown:
-            raise ValueError(f"load_frame: unknown keys {sorted(unknown)}; known: {sorted(known)}")
-        out = LoadFrameSimulation(**d)
+        out = section_from_dict(LoadFrameSimulation, d, "simulation.load_frame")
         if not out.rate_hz > 0 or not out.a_per_kpa > 0 or out.b_per_kpa < 0:
             raise ValueError("load_frame: rate_hz and a_per_kpa must be > 0 and b_per_kpa >= 0")
         return out

@@ -35,10 +35,14 @@ not yet measured), the height's frame-to-frame scatter for the strain.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from collections.abc import Mapping
+from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 import pandas as pd
+
+from triaxtrack.config_section import section_from_dict
 
 FILTER_PAPER_FULL_STRAIN = 0.02  # ASTM D4767: the filter-paper correction applies in full beyond 2 %
 
@@ -60,15 +64,13 @@ class StressConfig:
     section_levels: int = 41
 
     @staticmethod
-    def from_dict(d: dict) -> StressConfig:
-        known = {f.name for f in fields(StressConfig)}
-        unknown = set(d) - known
-        if unknown:
-            raise ValueError(f"stress: unknown settings {sorted(unknown)}; known: {sorted(known)}")
-        d = dict(d)
-        if d.get("search_s") is not None:
-            d["search_s"] = (float(d["search_s"][0]), float(d["search_s"][1]))
-        return StressConfig(**d)
+    def from_dict(d: Mapping[str, Any] | None) -> StressConfig:
+        """From the config's ``stress`` section (ValueError naming an unknown key); ``search_s``
+        a ``(lo, hi)`` tuple of floats."""
+        cfg = section_from_dict(StressConfig, d, "stress")
+        if cfg.search_s is None:
+            return cfg
+        return replace(cfg, search_s=(float(cfg.search_s[0]), float(cfg.search_s[1])))
 
 
 def noise_sigma(x: np.ndarray) -> float:
