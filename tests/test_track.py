@@ -94,28 +94,22 @@ def test_reported_dots_are_their_own(tracked):
     assert np.percentile(err[~clear], 99) < 0.6
 
 
-def test_the_first_frame_keeps_a_label_half_a_pixel_off_and_leaves_out_one_on_another_dot():
-    """Identification's and the tracker's centroid estimators differ by up to half a pixel on
-    blurred, compressed footage where both are right: such a target is followed. A label a half
-    spacing off (between two dots) is not the dot the tracker finds: left out (``disagrees``)."""
+def test_the_first_frame_leaves_out_a_target_whose_centroids_disagree():
+    """At the labelled frame a target whose identification centroid is farther than
+    ``first_agreement_px`` from the tracker's is left out of the chunk (``disagrees``: on the
+    demo, the visible sliver of a dot whose centre is behind a band); one within it is followed."""
     lab = first_labels()
     ids = lab["id"].to_numpy()
     near = np.flatnonzero(ids > 0)[:40:2]
     far = np.flatnonzero(ids > 0)[1:40:2]
-    lab.loc[near, "u_px"] += 0.5
-    lab.loc[far, "u_px"] += 0.5 * SPACING
+    lab.loc[near, "u_px"] += 0.1
+    lab.loc[far, "u_px"] += 0.4
     tr = track_frames(((k, render(k)) for k in range(3)), lab, "cam01", range(3))
     first = tr[tr["frame"] == 0].set_index("id")
     assert (first.loc[ids[near], "reason"] == "").all()
     assert (first.loc[ids[far], "reason"] == "disagrees").all()
-    t_ids, uv = truth_positions(2)
-    last = tr[(tr["frame"] == 2) & tr["id"].isin(ids[near])].set_index("id")
-    true_uv = pd.DataFrame(uv, index=t_ids).loc[last.index].to_numpy()
-    err = np.hypot(*(last[["u_px", "v_px"]].to_numpy() - true_uv).T)
-    a, b = bar_columns(2)
-    clear = (true_uv[:, 0] < a - DOT_R - 1) | (true_uv[:, 0] > b + DOT_R + 1)
-    assert (last["reason"] == "").all() and clear.sum() >= 15
-    assert err[clear].max() < 0.1 and err.max() < 0.6  # followed on their own dots
+    last = tr[(tr["frame"] == 2) & tr["id"].isin(ids[far])]
+    assert (last["reason"] == "disagrees").all()  # for the whole chunk
 
 
 def test_occluded_dots_are_dropped_and_picked_up_again(tracked):

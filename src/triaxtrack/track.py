@@ -43,12 +43,9 @@ from there each ID is carried forward without detecting or identifying the frame
      ``max_flow_residual_px`` from the local affine motion of its neighbours (its own kind:
      membrane, cell, top or bottom pedestal), which a partly hidden or wrongly followed dot
      does and a smoothly deforming membrane does not.
-   * ``disagrees``: at the chunk's first frame the tracker's centroid is farther from the
-     identification's than ``gate`` allows a move from the prediction (the two are not on one
-     dot: its surroundings confuse one of them): the target is left out of the chunk. The two
-     centroid estimators differ by up to half a pixel on blurred, compressed footage where both
-     are right (0.12 and 0.18 px from the truth on a realistic 720p test), so nothing finer
-     than the gate tells a wrong dot;
+   * ``disagrees``: at the chunk's first frame the tracker's centroid is farther than
+     ``first_agreement_px`` from the identification's (the dot's surroundings confuse one of
+     them, or most of it is hidden behind a band's edge): the target is left out of the chunk;
    * ``not_recorded``: the camera has no picture of the frame (frame map).
 
 4. **Re-acquire**: a dropped target keeps a virtual position, moved by its neighbours' affine
@@ -323,10 +320,10 @@ def _extrapolate(state: _State) -> tuple:
 def _set_reference(
     state: _State, meas: WindowMeasure, pred: np.ndarray, reason: np.ndarray, cfg: TrackingConfig
 ) -> None:
-    """At the chunk's first frame a target whose centroid (``meas``) is farther from the
-    identification's (``pred``) than ``gate`` times its spacing is left out of the chunk
+    """At the chunk's first frame a target whose centroid (``meas``) is farther than
+    ``first_agreement_px`` from the identification's (``pred``) is left out of the chunk
     (``disagrees`` in ``reason``); the others' centroids and normalised masses become the reference."""
-    agree = (reason == "") & (np.linalg.norm(meas.uv - pred, axis=1) <= cfg.gate * state.spacing)
+    agree = (reason == "") & (np.linalg.norm(meas.uv - pred, axis=1) <= cfg.first_agreement_px)
     reason[(reason == "") & ~agree] = "disagrees"
     state.ref_uv = np.where(agree[:, None], meas.uv, np.nan)
     state.ref_mass = np.where(agree, meas.mass, np.nan)

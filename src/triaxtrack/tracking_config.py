@@ -24,6 +24,7 @@ class TrackingConfig:
     mass_change: float = 0.25  # max relative change of a blob's mass from the chunk's first frame
     mass_step: float = 0.1  # max relative change of a blob's mass from the frame it was last seen
     max_flow_residual_px: float = 0.5  # max departure from the neighbours' affine motion, pixels
+    first_agreement_px: float = 0.25  # at the labelled frame: max distance to the detection's centroid
     disc_margin_px: float = 1.0  # the blob's disc: its semi-major axis plus this, pixels
     ink_fraction: float = DetectParams.ink_fraction  # ink: darker than ink_fraction x the white level
     # the stages (rules track_targets, triangulate_chunk, collect_timesteps; the workflow)
