@@ -13,6 +13,10 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 import pytest
+from test_volume import (  # the deforming specimen's points, as the volume tests build them
+    LOADED,
+    frame_points,
+)
 
 from triaxtrack.influence import INFLUENCE_COLUMNS, cluster_sigma, observation_influence
 from triaxtrack.volume import top_cap, volume_series
@@ -87,8 +91,6 @@ def test_volume_gradient_is_the_volumes_derivative(design, table):
     """Moving the membrane dots out by a few micrometres each (varying from dot to dot) and the
     top cap up changes the measured volume by the gradient's dot product with the shifts (within
     2 %)."""
-    from tests.test_volume import LOADED, frame_points
-
     pts = frame_points(design, table, LOADED, 0.5)
     rng = np.random.default_rng(3)
     xyz = pts[["x_mm", "y_mm", "z_mm"]].to_numpy()
