@@ -111,3 +111,24 @@ def test_volume_gradient_is_the_volumes_derivative(design, table):
     print(f"\nvolume change {change:.3f} mm3, predicted {predicted:.3f} mm3")
     assert predicted > 100.0
     assert change == pytest.approx(predicted, rel=0.02)
+
+
+def test_the_volume_stage_reads_only_the_used_influences(tmp_path):
+    """``observation_influences`` reads the influence columns of the used observations with a
+    finite influence; an older observations.parquet without them gives None (the independent
+    model)."""
+    from triaxtrack.tables import OBSERVATIONS, write_table
+    from triaxtrack.volume.series import observation_influences
+
+    obs = pd.DataFrame({
+        "camera": ["cam01", "cam01", "cam02", "cam02"], "frame": [0, 0, 0, 1], "id": [1001, 1002, 1001, 1001],
+        "u_px": 1.0, "v_px": 2.0, "used": [True, False, True, True],
+        "ix_mm": [0.1, np.nan, 0.2, np.nan], "iy_mm": 0.0, "iz_mm": 0.0,
+    })  # fmt: skip
+    write_table(obs, tmp_path / "with.parquet", OBSERVATIONS)
+    got = observation_influences(tmp_path / "with.parquet")
+    assert got is not None
+    assert list(got.columns) == ["camera", "frame", "id", *INFLUENCE_COLUMNS]
+    assert got[["camera", "id"]].astype(str).values.tolist() == [["cam01", "1001"], ["cam02", "1001"]]
+    write_table(obs.drop(columns=list(INFLUENCE_COLUMNS)), tmp_path / "without.parquet", OBSERVATIONS)
+    assert observation_influences(tmp_path / "without.parquet") is None

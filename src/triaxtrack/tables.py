@@ -10,11 +10,12 @@ with ``n_rays < 2`` are not expected to be reconstructed.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
 import pandas as pd
+import pyarrow.parquet as pq
 
 
 @dataclass(frozen=True)
@@ -110,6 +111,8 @@ def conform(df: pd.DataFrame, schema: Schema, source: str = "table") -> pd.DataF
             raise ValueError(f"{source}: {schema.name} column {col!r} is not {dtype}: {err}") from err
     extra = [c for c in out.columns if c not in schema.columns]
     out = out[list(schema.columns) + extra]
+    if not schema.key:
+        return out.reset_index(drop=True)
     return out.sort_values(list(schema.key), kind="stable").reset_index(drop=True)
 
 
@@ -128,6 +131,33 @@ def read_table(path: str | Path, schema: Schema) -> pd.DataFrame:
     except (OSError, ValueError) as err:
         raise ValueError(f"{path}: cannot read {schema.name} table: {err}") from err
     return conform(df, schema, str(path))
+
+
+def table_columns(path: str | Path) -> list[str]:
+    """The column names of a Parquet table, without reading it (ValueError naming the file)."""
+    try:
+        return list(pq.read_schema(path).names)
+    except (OSError, ValueError) as err:
+        raise ValueError(f"{path}: cannot read a table's columns: {err}") from err
+
+
+def read_table_batches(
+    path: str | Path, schema: Schema, columns: Sequence[str], rows: int = 200_000
+) -> Iterator[pd.DataFrame]:
+    """A large Parquet table's ``columns`` in batches of about ``rows`` rows, in the file's order,
+    each checked against the schema's columns among them (a few columns of millions of rows,
+    never all in memory as Python objects at once). ValueError naming the file when it cannot be
+    read or lacks one of ``columns``."""
+    try:
+        f = pq.ParquetFile(path)
+    except (OSError, ValueError) as err:
+        raise ValueError(f"{path}: cannot read {schema.name} table: {err}") from err
+    missing = [c for c in columns if c not in f.schema_arrow.names]
+    if missing:
+        raise ValueError(f"{path}: {schema.name} table lacks columns {missing}")
+    sub = Schema(schema.name, {c: t for c, t in schema.columns.items() if c in columns}, ())
+    for batch in f.iter_batches(batch_size=rows, columns=list(columns)):
+        yield conform(batch.to_pandas(), sub, str(path))
 
 
 LABELS = Schema(

@@ -11,7 +11,17 @@ import pandas as pd
 
 from triaxtrack.influence import INFLUENCE_COLUMNS
 from triaxtrack.kit import load_kit_design, target_table
-from triaxtrack.tables import OBSERVATIONS, POINTS, STRAINS, VOLUME_RESULT, conform, read_table, write_table
+from triaxtrack.tables import (
+    OBSERVATIONS,
+    POINTS,
+    STRAINS,
+    VOLUME_RESULT,
+    conform,
+    read_table,
+    read_table_batches,
+    table_columns,
+    write_table,
+)
 from triaxtrack.volume.cap import TopCap, top_cap, top_cap_from_membrane
 from triaxtrack.volume.grid import (
     MAX_MISSING_SHARE,
@@ -180,17 +190,22 @@ def volume_series(
     strain_parts: list[pd.DataFrame] = []
     ref: tuple[int, MembraneGrid, float, float] | None = None
     ref_points = points.iloc[:0]
-    by_frame = {} if influence is None else dict(tuple(influence.groupby("frame")))
+    if influence is not None:  # one frame's rows are a slice (no copy per frame)
+        influence = influence.sort_values("frame", kind="stable", ignore_index=True)
+        at = influence["frame"].to_numpy()
     for frame in frames:
         pf = points[points["frame"] == frame]
         time_s = float(pf["time_s"].iloc[0])
         share = measured_share(pf, table)
         row = {"frame": int(frame), "time_s": time_s, "measured_fraction": share}
+        mine = None
+        if influence is not None:
+            mine = influence.iloc[np.searchsorted(at, frame) : np.searchsorted(at, frame, "right")]
         try:
             grid0 = None if ref is None else ref[1]
             grid, cap, res, unc, watertight = _measure_frame(
                 pf, table, design, t0, max_missing_share, grid0, thickness_model, levels, check,
-                None if influence is None else by_frame.get(frame, influence.iloc[:0]),
+                mine,
             )  # fmt: skip
             if ref is None:
                 ref = (int(frame), grid, res.height_mm, res.volume_mm3)
@@ -254,16 +269,23 @@ def volume_meshes(
         yield int(frame), path, ""
 
 
-def observation_influences(observations: pd.DataFrame) -> pd.DataFrame | None:
+def observation_influences(path: str | Path) -> pd.DataFrame | None:
     """The used observations' rows ``camera, frame, id, ix_mm, iy_mm, iz_mm`` of an
-    ``observations.parquet`` table (:data:`~triaxtrack.tables.WATER_RESIDUALS`' influences), None
-    when it has no influences (written before they were)."""
-    cols = list(INFLUENCE_COLUMNS)
-    if not set(cols) <= set(observations.columns):
+    ``observations.parquet`` (:data:`~triaxtrack.tables.WATER_RESIDUALS`' influences), None when
+    it has no influences (written before they were). Read in batches, kept compact (the camera
+    a category, the influences float32: about 30 bytes an observation)."""
+    cols = ["camera", "frame", "id", "used", *INFLUENCE_COLUMNS]
+    if not set(cols) <= set(table_columns(path)):
         return None
-    used = observations[observations["used"].astype(bool)] if "used" in observations else observations
-    used = used[np.isfinite(used[cols].to_numpy(float)).all(axis=1)]
-    return used[["camera", "frame", "id", *cols]].reset_index(drop=True)
+    parts = []
+    for obs in read_table_batches(path, OBSERVATIONS, cols):
+        psi = obs[list(INFLUENCE_COLUMNS)].to_numpy(float)
+        keep = obs["used"].astype(bool).to_numpy() & np.isfinite(psi).all(axis=1)
+        part = obs.loc[keep, ["camera", "frame", "id"]].astype({"camera": "category"})
+        compact = {c: psi[keep, k].astype(np.float32) for k, c in enumerate(INFLUENCE_COLUMNS)}
+        parts.append(part.assign(**compact))
+    empty = pd.DataFrame(columns=["camera", "frame", "id", *INFLUENCE_COLUMNS])
+    return pd.concat(parts or [empty], ignore_index=True).astype({"camera": "category"})
 
 
 def run_measure_volume(
@@ -288,8 +310,7 @@ def run_measure_volume(
     design = load_kit_design(kit)
     table = target_table(design)
     pts = read_table(points, POINTS)
-    obs = None if observations is None else read_table(observations, OBSERVATIONS)
-    influence = None if obs is None else observation_influences(obs)
+    influence = None if observations is None else observation_influences(observations)
     if influence is None:
         print("no observation influences: the volume's uncertainty takes the points as independent")
     t0, model = cfg["membrane_thickness_mm"], cfg["thickness_model"]
