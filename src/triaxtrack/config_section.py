@@ -1,9 +1,10 @@
 """One rule for building a settings dataclass from a section of the configuration.
 
-Every section of ``config.yaml`` that the package reads through a frozen dataclass
-(``calibration``, ``reconstruction``, ``tracking``, ``stress``, ``score``, ``simulation`` and
-its ``load_frame``) is built by that dataclass's ``from_dict``, and each ``from_dict`` calls
-:func:`section_from_dict` (or :func:`section_dict`, when it converts values first):
+Every section of ``config.yaml`` is read by the package through a frozen dataclass
+(``calibration``, ``reconstruction``, ``cell``, ``tracking``, ``volume``, ``stress``, ``report``,
+``score``, ``simulation`` and its ``load_frame``), built by that dataclass's ``from_dict``, and
+each ``from_dict`` calls :func:`section_from_dict` (or :func:`section_dict`, when it converts
+values first):
 
 * **An unknown key is an error**: ValueError naming the section, the key, the key meant for a
   near miss and the known keys (``tracking: unknown key 'gates' (did you mean 'gate'?); known

@@ -22,6 +22,7 @@ from xml.sax.saxutils import quoteattr
 import numpy as np
 import pandas as pd
 
+from triaxtrack.volume.config import VolumeConfig
 from triaxtrack.volume.grid import MAX_MISSING_SHARE, MembraneGrid
 from triaxtrack.volume.series import FAILURES, frame_grid
 from triaxtrack.volume.strains import strain_field
@@ -111,12 +112,12 @@ def measured_membrane_frames(
     kit_dir: str | Path,
     volume_path: str | Path,
     points_path: str | Path,
-    volume_cfg: dict,
+    volume_config: VolumeConfig,
     max_frames: int | None = None,
 ) -> Iterator[MembraneFrame | tuple[int, str]]:
     """:func:`membrane_frames` of the frames ``volume.parquet`` measured (at most ``max_frames``
     of them, spread over the test as the report's, :func:`triaxtrack.report.chosen_frames`),
-    read from the test's kit, ``volume.parquet`` and ``points.parquet``; ``volume_cfg``: the
+    read from the test's kit, ``volume.parquet`` and ``points.parquet``; ``volume_config``: the
     config's ``volume`` section (membrane thickness, largest missing share)."""
     from triaxtrack.kit import load_kit_design, target_table
     from triaxtrack.tables import POINTS, VOLUME_RESULT, read_table
@@ -131,8 +132,8 @@ def measured_membrane_frames(
     reference = volume["reference_frame"].dropna()
     return membrane_frames(
         read_table(points_path, POINTS), target_table(design), design, frames,
-        int(reference.iloc[0]) if len(reference) else -1, t0=volume_cfg["membrane_thickness_mm"],
-        max_missing_share=volume_cfg["max_missing_share"],
+        int(reference.iloc[0]) if len(reference) else -1, t0=volume_config.membrane_thickness_mm,
+        max_missing_share=volume_config.max_missing_share,
     )  # fmt: skip
 
 
@@ -217,5 +218,6 @@ def run_export_paraview(
     (:func:`measured_membrane_frames` of the kit folder ``kit`` and ``points``; ``volume_cfg``:
     the config's ``volume`` section) as a ParaView series in the folder ``series``
     (:func:`write_paraview_series`); prints the frames written and those that failed."""
-    done = write_paraview_series(measured_membrane_frames(kit, volume, points, volume_cfg), series)
+    frames = measured_membrane_frames(kit, volume, points, VolumeConfig.from_dict(volume_cfg))
+    done = write_paraview_series(frames, series)
     print(f"{len(done['written'])} frames written; failed: {done['failed']}")

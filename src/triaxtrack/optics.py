@@ -13,12 +13,15 @@ coordinates, converged to 1e-6 mm) and then applies OpenCV's distortion.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import cv2
 import numpy as np
 
+from triaxtrack.config_section import section_from_dict
 from triaxtrack.testfolder import read_cameras_doc, write_cameras_doc
 
 NEWTON_MAX_ITER = 30
@@ -104,6 +107,23 @@ class CellOptics:
     n_air: float = field(default=1.0)
 
 
+@dataclass(frozen=True)
+class CellConfig:
+    """Settings of config section ``cell`` (config/README.md): the acrylic cell and the water,
+    each None for the kit's value (``kit.json``: ``cell``, ``water``)."""
+
+    wall_thickness_mm: float | None = None  # None: the kit's (inner radius = fitted outer radius - this)
+    n_acrylic: float | None = None  # None: the kit's (PMMA at 589 nm, 20 C: 1.491)
+    n_water: float | None = None  # None: the kit's (water at 589 nm, 20 C: 1.333)
+    wavelength_nm: float | None = None  # the wavelength the indices hold for; None: the kit's
+    temperature_c: float | None = None  # the temperature the indices hold for; None: the kit's
+
+    @staticmethod
+    def from_dict(d: Mapping[str, Any] | None) -> CellConfig:
+        """From the config's ``cell`` section (ValueError naming an unknown key)."""
+        return section_from_dict(CellConfig, d, "cell")
+
+
 def cell_optics(
     design: dict,
     outer_radius: float | None = None,
@@ -127,16 +147,16 @@ def cell_optics(
     )
 
 
-def configured_cell(design: dict, cell_cfg: dict, outer_radius: float | None = None) -> CellOptics:
-    """:func:`cell_optics` of a kit design with the config's ``cell`` section (``cell_cfg``:
-    ``wall_thickness_mm``, ``n_acrylic``, ``n_water``, each null for the design's) and, if
+def configured_cell(design: dict, cell: CellConfig, outer_radius: float | None = None) -> CellOptics:
+    """:func:`cell_optics` of a kit design with the config's ``cell`` section (``cell``:
+    ``wall_thickness_mm``, ``n_acrylic``, ``n_water``, each None for the design's) and, if
     given, a measured ``outer_radius`` (mm)."""
     return cell_optics(
         design,
         outer_radius=outer_radius,
-        wall_thickness_mm=cell_cfg["wall_thickness_mm"],
-        n_acrylic=cell_cfg["n_acrylic"],
-        n_water=cell_cfg["n_water"],
+        wall_thickness_mm=cell.wall_thickness_mm,
+        n_acrylic=cell.n_acrylic,
+        n_water=cell.n_water,
     )
 
 

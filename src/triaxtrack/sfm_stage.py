@@ -10,7 +10,7 @@ from pathlib import Path
 from triaxtrack.calibrate.files import calibrated_camera
 from triaxtrack.eccentricity import mark_radii
 from triaxtrack.kit import design_points, load_kit_design, target_table
-from triaxtrack.optics import configured_cell
+from triaxtrack.optics import CellConfig, configured_cell
 from triaxtrack.reconstruction_config import SfmConfig
 from triaxtrack.sfm import cell_summary, reconstruct_cell
 from triaxtrack.tables import LABELS, POINTS, RESIDUALS, read_table, write_table
@@ -47,7 +47,7 @@ def run_reconstruct_cell(
     # undeformed), for the cameras that see too little of the wall
     water = design_pts[~wall].assign(kind=table.loc[~wall, "surface"].to_numpy())
     cfg = SfmConfig.from_dict(reconstruction_cfg)
-    optics = configured_cell(design, cell_cfg)
+    optics = configured_cell(design, CellConfig.from_dict(cell_cfg))
     labelled = read_table(labels, LABELS)
     radii = mark_radii(design, table)
     rec = reconstruct_cell(

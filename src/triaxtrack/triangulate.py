@@ -39,6 +39,7 @@ from triaxtrack.influence import INFLUENCE_COLUMNS, observation_influence
 from triaxtrack.kit import design_points, load_kit_design, target_table
 from triaxtrack.optics import (
     Camera,
+    CellConfig,
     CellOptics,
     configured_cell,
     pixels_to_normalized,
@@ -482,18 +483,18 @@ def quality_cell(quality: dict) -> CellOptics:
     )
 
 
-def with_cell_record(quality: dict, cell_doc: dict, cell_cfg: dict, design: dict) -> dict:
+def with_cell_record(quality: dict, cell_doc: dict, cell_config: CellConfig, design: dict) -> dict:
     """The first frame's ``quality`` (:func:`quality_report`) with the record of the cell and
     cameras of ``cell_doc`` (rule reconstruct_cell's ``cell.json``,
     :func:`triaxtrack.sfm.cell_summary`): the cell's axis tilt, cylinder RMS and ``source``, how
     each camera was posed and which were left out; and the wavelength and temperature the
-    indices hold for (``cell_cfg``, the config's ``cell`` section, else the kit's). A new dict,
+    indices hold for (``cell_config``, the config's ``cell`` section, else the kit's). A new dict,
     the keys in ``quality``'s order and the new ones after them."""
     fitted, kit_cell = cell_doc["cell"], design["cell"]
     cell = {
         **quality["cell"],
-        "wavelength_nm": cell_cfg["wavelength_nm"] or kit_cell.get("wavelength_nm"),
-        "temperature_c": cell_cfg["temperature_c"] or kit_cell.get("temperature_c"),
+        "wavelength_nm": cell_config.wavelength_nm or kit_cell.get("wavelength_nm"),
+        "temperature_c": cell_config.temperature_c or kit_cell.get("temperature_c"),
         "axis_tilt_deg": fitted["axis_tilt_deg"],
         "cylinder_rms_mm": fitted["cylinder_rms_mm"],
         "source": fitted["source"],
@@ -539,7 +540,8 @@ def run_trace_specimen(
     design = load_kit_design(kit)
     table = target_table(design)
     design_pts = design_points(design, table)
-    optics = configured_cell(design, cell_cfg, outer_radius=cell_doc["cell"]["outer_radius_mm"])
+    cell_config = CellConfig.from_dict(cell_cfg)
+    optics = configured_cell(design, cell_config, outer_radius=cell_doc["cell"]["outer_radius_mm"])
     fps = read_test_fps(test_yaml)
     labelled = read_table(labels, LABELS)
     in_water = table.loc[table["surface"] != "cell_outer", "id"].to_numpy()
@@ -551,7 +553,7 @@ def run_trace_specimen(
         REFERENCE_FRAME, REFERENCE_FRAME / fps, mark_radii(design, table),
     )  # fmt: skip
     membrane_ids = table.loc[table["surface"] == "membrane", "id"].to_numpy()
-    report = with_cell_record(quality_report(rec, labelled, membrane_ids), cell_doc, cell_cfg, design)
+    report = with_cell_record(quality_report(rec, labelled, membrane_ids), cell_doc, cell_config, design)
     write_cameras(cameras, dict(sorted(rec.cameras.items())))
     write_table(rec.points, points, POINTS)
     used = rec.residuals[rec.residuals["used"]]

@@ -5,8 +5,9 @@
 #     report: "workflow/report/workflow.rst"
 #     include: "workflow/rules/report.smk"
 #
-# Config keys (config["report"]): strain_map_frames, movie_fps, movie_max_frames,
-# movie_colour_by, movie_magnify, movie_height_px (see config/README.md).
+# Config section config["report"], handed whole to the package (triaxtrack.report.ReportConfig):
+# strain_map_frames, movie_fps, movie_max_frames, movie_colour_by, movie_magnify,
+# movie_height_px (see config/README.md).
 #
 # Snakemake's report shows PNG, SVG, JPEG inline and HTML and PDF in a frame; any other file,
 # an MP4 included, is only a download button. So specimen_movie also writes specimen.html, a
@@ -67,7 +68,7 @@ rule report_figures:
         mem_mb=4000,  # tracking.parquet: one row per camera, target and frame
         runtime=20,
     params:
-        strain_map_frames=config["report"]["strain_map_frames"],
+        report=config["report"],
     script:
         "../scripts/report_figures.py"
 
@@ -104,10 +105,6 @@ rule specimen_movie:
         mem_mb=3000,
         runtime=30,
     params:
-        fps=config["report"]["movie_fps"],
-        max_frames=config["report"]["movie_max_frames"],
-        colour_by=config["report"]["movie_colour_by"],
-        magnify=config["report"]["movie_magnify"],
-        height_px=config["report"]["movie_height_px"],
+        report=config["report"],
     script:
         "../scripts/specimen_movie.py"

@@ -104,8 +104,7 @@ rule specimen_viewer:
         mem_mb=3000,
         runtime=30,
     params:
-        colour_by=config["report"].get("viewer_colour_by", "e_zz"),
-        max_frames=config["report"].get("viewer_max_frames", 60),
+        report=config["report"],
         volume=config["volume"],
         name="{test}",
     script:

@@ -11,5 +11,5 @@ run_report_figures(
     volume=i.volume, strains=i.strains, quality=i.quality, tracking=i.tracking, labels=i.labels, kit=i.kit,
     volume_strain_png=o.volume_strain, strain_maps_png=o.strain_maps, reprojection_png=o.reprojection,
     tracking_png=o.tracking, cameras_png=o.cameras,
-    strain_map_frames=snakemake.params.strain_map_frames,
+    report_cfg=snakemake.params.report,
 )  # fmt: skip

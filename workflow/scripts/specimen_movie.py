@@ -9,6 +9,5 @@ i, o, p = snakemake.input, snakemake.output, snakemake.params
 run_specimen_movie(
     points=i.points, strains=i.strains, kit=i.kit,
     movie=o.movie, player=o.player,
-    test=snakemake.wildcards.test, fps=p.fps, max_frames=p.max_frames, colour_by=p.colour_by,
-    magnify=p.magnify, height_px=p.height_px,
+    test=snakemake.wildcards.test, report_cfg=p.report,
 )  # fmt: skip

@@ -8,5 +8,5 @@ log_to(snakemake.log[0])
 i, p = snakemake.input, snakemake.params
 run_specimen_viewer(
     volume=i.volume, points=i.points, kit=i.kit, html=snakemake.output.html,
-    colour_by=p.colour_by, max_frames=p.max_frames, volume_cfg=p.volume, name=p.name,
+    report_cfg=p.report, volume_cfg=p.volume, name=p.name,
 )  # fmt: skip

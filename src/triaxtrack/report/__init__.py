@@ -19,6 +19,7 @@ its figures and movie.
 * :func:`specimen_frames`, :func:`write_movie`, :func:`write_movie_page`: the deforming
   specimen seen from the side, as an H.264 MP4 and as a self-contained HTML player.
 * :func:`chosen_frames`: a few frames spread over the test.
+* :class:`ReportConfig`: the config section ``report`` (figures, movie, viewer).
 * :func:`membrane_layout`: the kit's membrane grid (rows, columns, IDs, design coordinates),
   which every figure and the movie read instead of constants.
 
@@ -29,6 +30,7 @@ positive.
 """
 
 from triaxtrack.report.common import chosen_frames
+from triaxtrack.report.config import ReportConfig
 from triaxtrack.report.figures import (
     LOSS_REASONS,
     REASON_COLOURS,
@@ -58,6 +60,7 @@ __all__ = [
     "REASON_COLOURS",
     "REPORTED",
     "MembraneLayout",
+    "ReportConfig",
     "chosen_frames",
     "draw_bars",
     "figure_image",

@@ -23,6 +23,7 @@ from matplotlib.figure import Figure
 from triaxtrack.camera_report import camera_quality, camera_quality_figure
 from triaxtrack.kit import load_kit_design
 from triaxtrack.report.common import chosen_frames, number
+from triaxtrack.report.config import ReportConfig
 from triaxtrack.report.layout import MembraneLayout, membrane_layout
 from triaxtrack.report.maps import strain_maps_figure
 from triaxtrack.report.style import PALETTE, new_figure, no_data, save_figure, styled
@@ -351,12 +352,13 @@ def run_report_figures(
     reprojection_png: str | Path,
     tracking_png: str | Path,
     cameras_png: str | Path,
-    strain_map_frames: int,
+    report_cfg: dict,
 ) -> None:
     """Rule report_figures: the report's PNG figures of one test from its ``volume``,
     ``strains``, ``quality`` (the test's ``quality.json``), ``tracking`` and ``labels``, with the
     membrane grid of the kit folder ``kit``: volume and strains (:func:`volume_strain_figure`),
-    local strain maps at ``strain_map_frames`` frames spread over the test
+    local strain maps at ``strain_map_frames`` (``report_cfg``: the config's ``report`` section,
+    :class:`ReportConfig`) frames spread over the test
     (:func:`~triaxtrack.report.maps.strain_maps_figure`), reprojection error
     (:func:`reprojection_figure`), tracking losses (:func:`tracking_figure`) and footage quality
     per camera (:func:`triaxtrack.camera_report.camera_quality_figure`). Prints the kit's grid,
@@ -369,7 +371,7 @@ def run_report_figures(
     tracks = read_table(tracking, TRACKS)
     cameras = camera_quality(tracks, read_table(labels, LABELS))
     print(cameras.to_string(index=False))
-    frames = chosen_frames(local["frame"].unique(), strain_map_frames)
+    frames = chosen_frames(local["frame"].unique(), ReportConfig.from_dict(report_cfg).strain_map_frames)
     print(f"strain maps at frames {frames}")
     save_figure(volume_strain_figure(vol), volume_strain_png)
     save_figure(strain_maps_figure(local, layout, frames), strain_maps_png)

@@ -27,6 +27,7 @@ from matplotlib.colors import Normalize, to_rgb
 
 from triaxtrack.kit import load_kit_design
 from triaxtrack.report.common import MIN_RANGE, chosen_frames, half_range
+from triaxtrack.report.config import ReportConfig
 from triaxtrack.report.layout import MembraneLayout, membrane_layout
 from triaxtrack.report.style import DIVERGING_CMAP, MISSING, figure_image, new_figure, styled
 from triaxtrack.tables import POINTS, STRAINS, read_table
@@ -422,23 +423,22 @@ def run_specimen_movie(
     movie: str | Path,
     player: str | Path,
     test: str,
-    fps: float,
-    max_frames: int,
-    colour_by: str,
-    magnify: float,
-    height_px: int,
+    report_cfg: dict,
 ) -> None:
     """Rule specimen_movie: the deforming specimen of ``test`` (its ``points`` and ``strains``,
-    the membrane grid of the kit folder ``kit``) at up to ``max_frames`` frames spread over the
-    test (:func:`specimen_frames`, coloured by ``colour_by``, displacements times ``magnify``,
-    ``height_px`` high), written as the MP4 ``movie`` at ``fps`` (:func:`write_movie`) and the
-    HTML page ``player`` that plays it (:func:`write_movie_page`); prints what was written."""
+    the membrane grid of the kit folder ``kit``) at up to ``movie_max_frames`` frames spread over
+    the test (:func:`specimen_frames`, coloured by ``movie_colour_by``, displacements times
+    ``movie_magnify``, ``movie_height_px`` high), written as the MP4 ``movie`` at ``movie_fps``
+    (:func:`write_movie`) and the HTML page ``player`` that plays it (:func:`write_movie_page`);
+    prints what was written. ``report_cfg``: the config's ``report`` section (:class:`ReportConfig`)."""
+    cfg = ReportConfig.from_dict(report_cfg)
+    fps, colour_by, magnify = cfg.movie_fps, cfg.movie_colour_by, cfg.movie_magnify
     layout = membrane_layout(load_kit_design(kit))
     pts = read_table(points, POINTS)
     local = read_table(strains, STRAINS)
-    frames = chosen_frames(pts["frame"].unique(), max_frames)
+    frames = chosen_frames(pts["frame"].unique(), cfg.movie_max_frames)
     shown = specimen_frames(
-        pts, layout, local, colour_by=colour_by, frames=frames, height=height_px, magnify=magnify
+        pts, layout, local, colour_by=colour_by, frames=frames, height=cfg.movie_height_px, magnify=magnify
     )
     n = write_movie(shown, movie, fps)
     write_movie_page(

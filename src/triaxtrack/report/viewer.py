@@ -11,6 +11,8 @@ from pathlib import Path
 import numpy as np
 
 from triaxtrack.export import MembraneFrame, grid_quads, measured_membrane_frames
+from triaxtrack.report.config import ReportConfig
+from triaxtrack.volume.config import VolumeConfig
 
 STRAIN_LABELS = {"e_zz": "axial strain e_zz (%)", "e_tt": "circumferential strain e_tt (%)",
                  "e_tz": "shear strain e_tz (%)"}  # fmt: skip
@@ -93,17 +95,18 @@ def run_specimen_viewer(
     points: str | Path,
     kit: str | Path,
     html: str | Path,
-    colour_by: str,
-    max_frames: int,
+    report_cfg: dict,
     volume_cfg: dict,
     name: str,
 ) -> None:
-    """Rule specimen_viewer: :func:`viewer_html` titled ``name`` of up to ``max_frames`` of the
-    frames ``volume`` measured (:func:`~triaxtrack.export.measured_membrane_frames` of the kit
-    folder ``kit`` and ``points``; ``volume_cfg``: the config's ``volume`` section), coloured by
-    ``colour_by``, written to ``html``; prints how many frames it shows."""
-    series = list(measured_membrane_frames(kit, volume, points, volume_cfg, max_frames))
+    """Rule specimen_viewer: :func:`viewer_html` titled ``name`` of up to ``viewer_max_frames`` of
+    the frames ``volume`` measured (:func:`~triaxtrack.export.measured_membrane_frames` of the kit
+    folder ``kit`` and ``points``), coloured by ``viewer_colour_by``, written to ``html``; prints
+    how many frames it shows. ``report_cfg``, ``volume_cfg``: the config's ``report``
+    (:class:`ReportConfig`) and ``volume`` (:class:`~triaxtrack.volume.VolumeConfig`) sections."""
+    cfg, volume_config = ReportConfig.from_dict(report_cfg), VolumeConfig.from_dict(volume_cfg)
+    series = list(measured_membrane_frames(kit, volume, points, volume_config, cfg.viewer_max_frames))
     shown = [f for f in series if isinstance(f, MembraneFrame)]
     skipped = [f for f in series if not isinstance(f, MembraneFrame)]
-    Path(html).write_text(viewer_html(shown, colour_by, name, skipped))
+    Path(html).write_text(viewer_html(shown, cfg.viewer_colour_by, name, skipped))
     print(f"viewer: {len(shown)} of {len(series)} frames")

@@ -26,6 +26,7 @@ from triaxtrack.stress.log import QUANTITIES, read_load_frame_log
 from triaxtrack.stress.sections import SECTION_LEVELS, SECTION_MARGIN, section_areas
 from triaxtrack.tables import POINTS, STRESS_STRAIN, VOLUME_RESULT, conform, read_table, write_table
 from triaxtrack.testfolder import read_test_yaml
+from triaxtrack.volume.config import VolumeConfig
 
 
 def measure_stress(
@@ -36,13 +37,13 @@ def measure_stress(
     table: pd.DataFrame,
     design: dict,
     config: StressConfig | None = None,
-    volume_settings: dict | None = None,
+    volume_config: VolumeConfig | None = None,
 ) -> tuple[pd.DataFrame, dict]:
     """The stress-strain table (:data:`~triaxtrack.tables.STRESS_STRAIN`) of a test whose
     test.yaml (``test_yaml``, a mapping) has a ``load_frame`` entry, and the clock report:
     ``estimated_offset_s``, its ``sigma_s``, ``residual_mm``, ``scale``, the ``given_offset_s``
     (None when test.yaml gives none), the ``used_offset_s`` (the given one if any, else the
-    estimate) and a ``warning`` ('' or why). ``volume_settings``: config ``volume``
+    estimate) and a ``warning`` ('' or why). ``volume_config``: config ``volume``
     (membrane thickness, its model, max missing share) for the sections."""
     config = config or StressConfig()
     entry = test_yaml["load_frame"]
@@ -60,12 +61,11 @@ def measure_stress(
     )  # fmt: skip
     given = entry.get("clock_offset_s")
     used = estimate.offset_s if given is None else float(given)
-    vs = volume_settings or {}
+    vs = volume_config or VolumeConfig()
     sections = section_areas(
-        points, table, design, int(ref.iloc[0]), t0=vs.get("membrane_thickness_mm"),
-        thickness_model=vs.get("thickness_model", "area"), margin=config.section_margin,
-        levels=config.section_levels,
-        **({"max_missing_share": vs["max_missing_share"]} if "max_missing_share" in vs else {}),
+        points, table, design, int(ref.iloc[0]), t0=vs.membrane_thickness_mm,
+        thickness_model=vs.thickness_model, margin=config.section_margin,
+        levels=config.section_levels, max_missing_share=vs.max_missing_share,
     )  # fmt: skip
     out = stress_strain(
         volume, sections, log, used, design, config, offset_sigma_s=estimate.sigma_s if given is None else 0.0
@@ -114,7 +114,7 @@ def run_stress_strain(
     table, report = measure_stress(
         Path(test_yaml).parent, read_test_yaml(test_yaml), read_table(volume, VOLUME_RESULT),
         read_table(points, POINTS), target_table(design), design, StressConfig.from_dict(stress_cfg),
-        volume_cfg,
+        VolumeConfig.from_dict(volume_cfg),
     )  # fmt: skip
     write_table(table, stress, STRESS_STRAIN)
     write_json(clock, report)

@@ -52,13 +52,15 @@ the gaps on measured dots, in quadrature (:mod:`triaxtrack.volume.uncertainty`),
 Modules: :mod:`~triaxtrack.volume.grid` (the grid and its fill), :mod:`~triaxtrack.volume.cap`,
 :mod:`~triaxtrack.volume.surface` (interpolant, face cuts, rings), :mod:`~triaxtrack.volume.mesh`
 (volume, thickness, meshes), :mod:`~triaxtrack.volume.strains`,
-:mod:`~triaxtrack.volume.uncertainty`, :mod:`~triaxtrack.volume.series` (all frames).
+:mod:`~triaxtrack.volume.uncertainty`, :mod:`~triaxtrack.volume.series` (all frames),
+:mod:`~triaxtrack.volume.config` (the config section ``volume``: :class:`VolumeConfig`).
 
 On the simulator's synthetic frames the soil volume is exact to ~3e-7 (1e-5 in a shear band,
 see above); 0.02 mm noise on every point gives ~5e-5 (mostly the top cap's height).
 """
 
 from triaxtrack.volume.cap import TopCap, rigid_fit, top_cap, top_cap_from_membrane
+from triaxtrack.volume.config import VolumeConfig
 from triaxtrack.volume.grid import (
     MAX_MISSING_SHARE,
     WARN_MISSING_SHARE,
@@ -84,9 +86,9 @@ from triaxtrack.volume.uncertainty import VolumeUncertainty, volume_uncertainty
 
 __all__ = [
     "MAX_MISSING_SHARE", "REFINE_LEVELS", "WARN_MISSING_SHARE", "FaceEnds", "MembraneGrid", "TopCap",
-    "VolumeResult", "VolumeUncertainty", "check_mesh", "closed_mesh", "face_ends", "fill_grid",
-    "frame_grid", "membrane_grid", "membrane_thickness", "rigid_fit", "run_measure_volume", "signed_volume",
-    "specimen_volume",
+    "VolumeConfig", "VolumeResult", "VolumeUncertainty", "check_mesh", "closed_mesh", "face_ends",
+    "fill_grid", "frame_grid", "membrane_grid", "membrane_thickness", "rigid_fit", "run_measure_volume",
+    "signed_volume", "specimen_volume",
     "strain_field", "top_cap", "top_cap_from_membrane", "volume_meshes", "volume_series",
     "volume_uncertainty", "write_ply",
 ]  # fmt: skip

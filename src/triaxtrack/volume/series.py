@@ -23,6 +23,7 @@ from triaxtrack.tables import (
     write_table,
 )
 from triaxtrack.volume.cap import TopCap, top_cap, top_cap_from_membrane
+from triaxtrack.volume.config import VolumeConfig
 from triaxtrack.volume.grid import (
     MAX_MISSING_SHARE,
     WARN_MISSING_SHARE,
@@ -301,30 +302,30 @@ def run_measure_volume(
     """Rule measure_volume: :func:`volume_series` of every frame of ``points`` with the kit
     folder ``kit`` (``volume_cfg``: the config's ``volume`` section) and the influences of the
     ``observations`` (``observations.parquet``; :func:`observation_influences`), written to ``volume`` and
-    ``strains``; the PLY meshes of ``volume_cfg["mesh_frames"]`` measured frames spread over the
+    ``strains``; the PLY meshes of ``mesh_frames`` (:class:`VolumeConfig`) measured frames spread over the
     test in the folder ``meshes`` (:func:`volume_meshes`); prints the meshes, a summary and the
     frames with warnings or failed."""
     from triaxtrack.report.common import chosen_frames
 
-    cfg = volume_cfg  # the keys below are the config's (config/README.md)
+    cfg = VolumeConfig.from_dict(volume_cfg)
     design = load_kit_design(kit)
     table = target_table(design)
     pts = read_table(points, POINTS)
     influence = None if observations is None else observation_influences(observations)
     if influence is None:
         print("no observation influences: the volume's uncertainty takes the points as independent")
-    t0, model = cfg["membrane_thickness_mm"], cfg["thickness_model"]
-    share = cfg["max_missing_share"]
+    t0, model = cfg.membrane_thickness_mm, cfg.thickness_model
+    share = cfg.max_missing_share
     result, strain = volume_series(
         pts, table, design, t0=t0, max_missing_share=share, thickness_model=model,
-        warn_missing_share=cfg["warn_missing_share"], influence=influence,
+        warn_missing_share=cfg.warn_missing_share, influence=influence,
     )  # fmt: skip
     write_table(result, volume, VOLUME_RESULT)
     write_table(strain, strains, STRAINS)
     good = result.loc[result["reason"] == "", "frame"].tolist()
     out = Path(meshes)
     out.mkdir(parents=True, exist_ok=True)
-    chosen = chosen_frames(good, cfg["mesh_frames"])
+    chosen = chosen_frames(good, cfg.mesh_frames)
     reference = result["reference_frame"].dropna()
     written = volume_meshes(
         pts, table, design, chosen, out, t0=t0, thickness_model=model, max_missing_share=share,
