@@ -52,7 +52,6 @@ from triaxtrack.triangulate import quality_cell, triangulate_refracted
 
 MIN_WALL_TARGETS = 5  # fewer tracked cell-wall targets in a frame: the camera cannot be checked
 MIN_REPOSE_TARGETS = 12  # cell-wall targets a moved camera is posed again from (as the first frame's PnP)
-REPOSE_RANSAC_PX = SfmConfig.ransac_px  # PnP inlier threshold, pixels (reconstruction.ransac_px's default)
 
 
 def camera_motion(
@@ -60,6 +59,7 @@ def camera_motion(
     wall_points: pd.DataFrame,
     tracks: pd.DataFrame,
     moved_px: float = TrackingConfig.moved_px,
+    ransac_px: float = SfmConfig.ransac_px,
 ) -> tuple[pd.DataFrame, dict[tuple[str, int], Camera]]:
     """Per camera and frame: the median distance (pixels) of the tracked cell-wall targets from
     the projections of their first-frame points, whether the camera has moved, and whether it
@@ -70,7 +70,7 @@ def camera_motion(
     (``MOTION`` rows: ``camera, frame, wall_targets, drift_px, moved, reposed``, ``drift_px``
     NaN and ``moved`` False with fewer than ``MIN_WALL_TARGETS`` targets; ``{(camera, frame):
     the camera posed again}`` for the moved camera-frames it could be posed in, module
-    docstring).
+    docstring; ``ransac_px``: the PnP inlier threshold, config ``reconstruction.ransac_px``).
     """
     rep = tracks[(tracks["reason"] == "") & tracks["id"].isin(wall_points["id"])]
     xyz_all = wall_points.set_index("id")[["x_mm", "y_mm", "z_mm"]]
@@ -83,7 +83,7 @@ def camera_motion(
         d = d[np.isfinite(d)]
         drift = float(np.median(d)) if len(d) >= MIN_WALL_TARGETS else float("nan")
         moved = bool(drift > moved_px)
-        pose = _posed_again(cameras[name], xyz, seen, moved_px) if moved else None
+        pose = _posed_again(cameras[name], xyz, seen, moved_px, ransac_px) if moved else None
         if pose is not None:
             poses[(str(name), int(frame))] = pose
         rows.append({"camera": name, "frame": int(frame), "wall_targets": int(len(d)), "drift_px": drift,
@@ -91,13 +91,15 @@ def camera_motion(
     return pd.DataFrame(rows, columns=list(MOTION.columns)), poses
 
 
-def _posed_again(camera: Camera, xyz: np.ndarray, uv: np.ndarray, moved_px: float) -> Camera | None:
-    """``camera`` posed by PnP on its cell-wall targets (:func:`triaxtrack.refractive_pose.pnp_pose`)
-    where at least ``MIN_REPOSE_TARGETS`` are inliers and their median reprojection is within
-    ``moved_px``; else None."""
+def _posed_again(
+    camera: Camera, xyz: np.ndarray, uv: np.ndarray, moved_px: float, ransac_px: float
+) -> Camera | None:
+    """``camera`` posed by PnP on its cell-wall targets (:func:`triaxtrack.refractive_pose.pnp_pose`,
+    inliers within ``ransac_px``) where at least ``MIN_REPOSE_TARGETS`` are inliers and their
+    median reprojection is within ``moved_px``; else None."""
     if len(xyz) < MIN_REPOSE_TARGETS:
         return None
-    posed = pnp_pose(camera, xyz, uv, REPOSE_RANSAC_PX)
+    posed = pnp_pose(camera, xyz, uv, ransac_px)
     if posed is None or posed[1].sum() < MIN_REPOSE_TARGETS:
         return None
     cam, inlier = posed
@@ -446,7 +448,8 @@ def run_triangulate_chunk(
     first = read_table(reference_points, POINTS)
     wall = first[first["id"].isin(table.loc[table["surface"] == "cell_outer", "id"])]
     moved_px = TrackingConfig.from_dict(tracking_cfg).moved_px
-    moves, poses = camera_motion(posed, wall, tracked, moved_px)
+    ransac_px = SfmConfig.from_dict(reconstruction_cfg).ransac_px
+    moves, poses = camera_motion(posed, wall, tracked, moved_px, ransac_px)
     in_water = table.loc[table["surface"] != "cell_outer", "id"].to_numpy()
     frames = np.unique(tracked["frame"].to_numpy())
     cfg = TriangulationConfig.from_dict(reconstruction_cfg)
