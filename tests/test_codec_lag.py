@@ -91,7 +91,8 @@ def test_no_keyframe_measured_means_no_correction():
     tracks, _ = _tracks(lag=0.03, noise=0.01)
     fixed, lags = lag_corrected(tracks, np.array([], np.int64))
     assert lags.empty
-    assert fixed.equals(tracks)
+    assert fixed[tracks.columns].equals(tracks)
+    assert (fixed[["codec_u_px", "codec_v_px"]] == 0).all().all()
     assert np.isnan(_coefficients(np.array([5]), np.array([0]), lags)).all()  # nothing measured
 
 
@@ -179,7 +180,8 @@ def test_corrected_tracks_of_several_cameras_keep_their_rows():
     n = len(tracks)
     expected, _ = lag_corrected(tracks, KEYS)
     np.testing.assert_allclose(fixed.iloc[:n][["u_px", "v_px"]], expected[["u_px", "v_px"]])
-    pd.testing.assert_frame_equal(fixed.iloc[n:], both.iloc[n:])
+    pd.testing.assert_frame_equal(fixed.iloc[n:][both.columns], both.iloc[n:])
+    assert (fixed.iloc[n:][["codec_u_px", "codec_v_px"]] == 0).all().all()  # nothing known of cam02
 
 
 def test_a_lag_along_a_velocity_field_linear_in_the_image_is_removed():
@@ -366,3 +368,20 @@ def test_a_jitter_common_to_every_camera_is_not_read_as_an_offset():
     assert abs(top["v0_px"].mean()) > 3 * np.sqrt((top["sigma_v0_px"] ** 2).mean() / len(top))  # spread alone
     fixed = corrected_tracks(tracks, lags)
     assert np.abs(fixed["v_px"] - tracks["v_px"]).max() == 0
+    # what is not taken off is carried as the P frames' uncertainty, in full
+    p, cap = ~fixed["frame"].isin(keys), fixed["id"] <= 5
+    assert (fixed.loc[p & cap, "codec_v_px"] >= abs(top["v0_px"].mean())).all()
+    assert (fixed.loc[~p, "codec_v_px"] == 0).all()  # keyframes show the targets where they are
+
+
+def test_an_offset_taken_off_leaves_its_standard_error_in_the_p_frames():
+    """The cap's 0.011 px offset is taken off; what each P-frame observation carries is the
+    pooled offset's standard error, well below the offset; keyframes and membrane dots carry 0."""
+    tracks, _ = _rigid_tracks("cam01", 0.3, lambda t: np.where(t > 0, 0.011, 0.0), 0.003, 0)
+    fixed, _ = lag_corrected(tracks, KEYS, BODIES)
+    p, cap = ~fixed["frame"].isin(KEYS), fixed["id"] <= 5
+    left = fixed.loc[p & cap, "codec_v_px"]
+    assert 0 < left.min() and left.max() < 0.011 / 3
+    assert (fixed.loc[~p, ["codec_u_px", "codec_v_px"]] == 0).all().all()
+    dots, _ = _tracks(0.03, 0.005)
+    assert (lag_corrected(dots, KEYS)[0][["codec_u_px", "codec_v_px"]] == 0).all().all()  # membrane: 0

@@ -18,7 +18,14 @@ from test_volume import (  # the deforming specimen's points, as the volume test
     frame_points,
 )
 
-from triaxtrack.influence import INFLUENCE_COLUMNS, cluster_sigma, observation_influence
+from triaxtrack.influence import (
+    CODEC_SHIFT_COLUMNS,
+    INFLUENCE_COLUMNS,
+    cluster_sigma,
+    observation_influence,
+    observation_shift,
+    shared_sigma,
+)
 from triaxtrack.volume import top_cap, volume_series
 from triaxtrack.volume.grid import grid_ids, membrane_grid
 from triaxtrack.volume.uncertainty import volume_gradient
@@ -132,3 +139,26 @@ def test_the_volume_stage_reads_only_the_used_influences(tmp_path):
     assert got[["camera", "id"]].astype(str).values.tolist() == [["cam01", "1001"], ["cam02", "1001"]]
     write_table(obs.drop(columns=list(INFLUENCE_COLUMNS)), tmp_path / "without.parquet", OBSERVATIONS)
     assert observation_influences(tmp_path / "without.parquet") is None
+
+
+def test_shared_sigma_is_the_statistics_move_when_every_camera_errs_alike():
+    """An error of every observation alike moves the least-squares points by the sum of their
+    rays' pulls (:func:`observation_shift`), and the statistic by exactly ``shared_sigma`` per
+    axis (a linear model: to rounding)."""
+    _, jac, cam_of, group, grad = _scene(3)
+    jtj = np.zeros((N_POINTS, 3, 3))
+    np.add.at(jtj, group, np.einsum("nki,nkj->nij", jac, jac))
+    cov = np.linalg.inv(jtj)
+    gradient = pd.DataFrame({"id": np.arange(N_POINTS), "gx": grad[:, 0], "gy": grad[:, 1], "gz": grad[:, 2]})
+    moves, shifts = [], np.zeros((N_POINTS, 6))
+    for a, size in ((0, 0.02), (1, 0.05)):
+        err = np.zeros((len(cam_of), 2))
+        err[:, a] = size
+        np.add.at(shifts[:, 3 * a : 3 * a + 3], group, observation_shift(jac, cov, group, err))
+        jte = np.zeros((N_POINTS, 3))
+        np.add.at(jte, group, np.einsum("nki,nk->ni", jac, err))
+        moves.append(np.sum(grad * np.einsum("mij,mj->mi", cov, jte)))  # the points re-solved
+    table = pd.DataFrame(shifts, columns=list(CODEC_SHIFT_COLUMNS)).assign(id=np.arange(N_POINTS))
+    assert shared_sigma(table, gradient) == pytest.approx(np.hypot(*moves), rel=1e-9)
+    assert abs(moves[1]) > 0.1 * abs(moves[0]) > 0  # both axes count
+    assert shared_sigma(table.assign(id=table["id"] + N_POINTS), gradient) == 0.0  # no point meets it

@@ -13,6 +13,7 @@ import pandas as pd
 import pytest
 
 from triaxtrack.cell_frame import axis_frame, fit_cylinder, similarity_transform, transform_points
+from triaxtrack.influence import CODEC_SHIFT_COLUMNS
 from triaxtrack.kit import design_points
 from triaxtrack.optics import Camera, cell_optics, project_air, project_water
 from triaxtrack.refractive_pose import PoseObservations, image_spread_px, min_spread_px, pose_camera
@@ -289,6 +290,33 @@ def test_a_wrong_water_label_is_dropped_and_only_its_point_moves(scene):
     np.testing.assert_allclose(
         pts.loc[others, ["x_mm", "y_mm", "z_mm"]], clean.loc[others, ["x_mm", "y_mm", "z_mm"]]
     )
+
+
+def test_the_codec_shifts_are_the_points_moves_when_every_camera_errs_alike(scene):
+    """An error of every observation alike (the codec correction's, ``codec_u_px, codec_v_px``)
+    moves each point by the sum of its rays' pulls: the points' ``codec_*_mm`` match triangulating
+    again with every observation moved by it (to 2 % of the shift, the projection being nearly
+    linear over 0.05 px); without the columns the points have none."""
+    obs = _water(scene).reset_index(drop=True)
+    cams, cfg = scene["cameras"], TriangulationConfig()
+    rng = np.random.default_rng(5)
+    codec = rng.uniform(0.02, 0.05, (len(obs), 2)) * (obs["id"].to_numpy() < 1000)[:, None]
+    given = obs.assign(codec_u_px=codec[:, 0], codec_v_px=codec[:, 1])
+    got = triangulate_refracted(cams, given, scene["cell"], cfg)
+    assert "codec_u_px" not in got.residuals.columns
+    pts = got.points.set_index("id")
+    for axis, cols in (("u_px", CODEC_SHIFT_COLUMNS[:3]), ("v_px", CODEC_SHIFT_COLUMNS[3:])):
+        moved = obs.assign(**{axis: obs[axis] + codec[:, 0 if axis == "u_px" else 1]})
+        again = triangulate_refracted(cams, moved, scene["cell"], cfg).points.set_index("id")
+        ids = pts.index[pts.index < 1000]  # the pedestals' targets
+        xyz = ["x_mm", "y_mm", "z_mm"]
+        shift = again.loc[ids, xyz].to_numpy() - pts.loc[ids, xyz].to_numpy()
+        predicted = pts.loc[ids, list(cols)].to_numpy()
+        assert np.abs(shift).max() > 1e-3  # a shift to see
+        np.testing.assert_allclose(predicted, shift, atol=0.02 * np.abs(shift).max())
+        assert (pts.loc[pts.index >= 1000, list(cols)].to_numpy() == 0).all()  # no error given there
+    plain = triangulate_refracted(cams, obs, scene["cell"], cfg).points
+    assert not set(CODEC_SHIFT_COLUMNS) & set(plain.columns)
 
 
 # ---------------------------------------------------------------- cameras posed through the wall

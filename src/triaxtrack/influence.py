@@ -26,7 +26,11 @@ clusters:
   camera's errors shared, it grows by exactly their correlation.
 
 What it cannot see: an error common to every camera (the cell's refraction model, a bias of
-every centroid alike), since the rays then agree with each other.
+every centroid alike), since the rays then agree with each other. Where such an error's size is
+known from elsewhere (the codec correction's own uncertainty, :mod:`triaxtrack.codec_lag`), it
+is carried by **shared shifts** (:func:`observation_shift`, :func:`shared_sigma`): each point's
+displacement by that error at 1 sigma, in every camera at once, summed over its observations;
+the statistic moves by the sum over every point, in full.
 """
 
 from __future__ import annotations
@@ -36,6 +40,10 @@ import pandas as pd
 
 MIN_RESIDUAL_SHARE = 0.01  # (I - h) eigenvalues floored here: a ray with nearly all the say, x10 at most
 INFLUENCE_COLUMNS = ("ix_mm", "iy_mm", "iz_mm")
+# a point's shift (mm) by the codec correction's uncertainty along the images' u, then v axis
+CODEC_SHIFT_COLUMNS = (
+    "codec_ux_mm", "codec_uy_mm", "codec_uz_mm", "codec_vx_mm", "codec_vy_mm", "codec_vz_mm",
+)  # fmt: skip
 
 
 def observation_influence(
@@ -76,3 +84,27 @@ def cluster_sigma(influence: pd.DataFrame, gradient: pd.DataFrame) -> tuple[floa
         return float("nan"), 0
     per_camera = pd.Series(ds[ok]).groupby(inf["camera"].to_numpy()[ok]).sum()
     return float(np.sqrt(np.sum(per_camera.to_numpy() ** 2))), len(per_camera)
+
+
+def observation_shift(jac: np.ndarray, cov: np.ndarray, group: np.ndarray, error: np.ndarray) -> np.ndarray:
+    """(N, 3) shift (mm) of each observation's point by an ``error`` (N, 2, px) of that
+    observation, ``H^-1 J^T e`` (arguments as :func:`observation_influence`); NaN where the point
+    or the Jacobian is not finite."""
+    h_inv = np.asarray(cov, float)[np.asarray(group)]
+    return np.einsum("nij,nkj,nk->ni", h_inv, np.asarray(jac, float), np.asarray(error, float))
+
+
+def shared_sigma(shifts: pd.DataFrame, gradient: pd.DataFrame) -> float:
+    """Standard uncertainty of a statistic of one frame's points from errors every camera
+    shares: ``shifts`` rows ``id`` and :data:`CODEC_SHIFT_COLUMNS` (each point's displacement by
+    the error along the images' u, then v axis, at 1 sigma; the two axes independent),
+    ``gradient`` as :func:`cluster_sigma`'s. Each axis moves the statistic by ``sum_p g_p . s_p``
+    over every point, in full; 0 when no point meets the gradient."""
+    g = gradient.set_index("id")[["gx", "gy", "gz"]]
+    s = shifts[shifts["id"].isin(g.index)]
+    if s.empty:
+        return 0.0
+    grad = g.loc[s["id"]].to_numpy(float)
+    cols = list(CODEC_SHIFT_COLUMNS)
+    per_axis = [np.nansum(np.einsum("ni,ni->n", s[cols[a : a + 3]].to_numpy(float), grad)) for a in (0, 3)]
+    return float(np.hypot(*per_axis))

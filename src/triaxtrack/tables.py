@@ -33,6 +33,10 @@ POINTS = Schema(
      "z_mm": "float64", "n_rays": "int64", "rms_px": "float64"},
     ("frame", "id"),
 )  # fmt: skip
+"""Triangulated targets, one row per target per processed frame (mm, cell frame). Extra columns:
+``sigma_mm`` (the 3-D standard uncertainty, the square root of the covariance's trace) and, where
+the codec correction ran, ``codec_ux_mm ... codec_vz_mm`` (``triaxtrack.influence``: the point's
+shift by the correction's uncertainty along the images' u, then v axis, shared by every camera)."""
 OBSERVATIONS = Schema(
     "observations",
     {"camera": "object", "frame": "int64", "id": "int64", "u_px": "float64", "v_px": "float64"},

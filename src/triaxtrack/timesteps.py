@@ -29,6 +29,7 @@ import numpy as np
 import pandas as pd
 
 from triaxtrack.codec_lag import corrected_tracks, read_lag_files
+from triaxtrack.codec_lag.correct import CODEC_COLUMNS
 from triaxtrack.eccentricity import mark_radii
 from triaxtrack.jsonfile import write_json
 from triaxtrack.kit import load_kit_design, target_table
@@ -156,10 +157,12 @@ def triangulate_frames(
     ``mark_radius_mm``: the marks' printed radii, for their eccentricity
     (:func:`triaxtrack.triangulate.triangulate_refracted`), computed at every
     ``ECCENTRICITY_EVERY``-th frame and the last and interpolated between. Returns
-    ``(points, residuals)``: ``POINTS`` rows plus ``sigma_mm``, and ``WATER_RESIDUALS`` rows (every
-    observation offered, whether it was used and why not).
+    ``(points, residuals)``: ``POINTS`` rows plus ``sigma_mm`` (and the codec shifts where
+    ``tracks`` has ``codec_u_px, codec_v_px``: :func:`triaxtrack.codec_lag.corrected_tracks`),
+    and ``WATER_RESIDUALS`` rows (every observation offered, whether it was used and why not).
     """
     rep = tracks[(tracks["reason"] == "") & tracks["id"].isin(in_water) & tracks["frame"].isin(frames)]
+    columns = ["camera", "frame", "id", "u_px", "v_px", *[c for c in CODEC_COLUMNS if c in tracks.columns]]
     poses = poses or {}
     moved = set()
     if motion is not None and len(motion):
@@ -173,7 +176,7 @@ def triangulate_frames(
     solved: dict[int, tuple[pd.DataFrame, pd.DataFrame]] = {}
     ecc_at: dict[int, pd.DataFrame] = {}
     for frame in [*key, *np.setdiff1d(frames, key)]:
-        obs = rep[rep["frame"] == frame][["camera", "frame", "id", "u_px", "v_px"]].reset_index(drop=True)
+        obs = rep[rep["frame"] == frame][columns].reset_index(drop=True)
         if len(obs) == 0:
             continue
         off = np.array([(c, int(frame)) in moved for c in obs["camera"]], bool)

@@ -34,8 +34,14 @@ import pandas as pd
 from scipy.optimize import least_squares
 
 from triaxtrack.cell_frame import transform_points
+from triaxtrack.codec_lag.correct import CODEC_COLUMNS
 from triaxtrack.eccentricity import mark_radii, observation_eccentricity
-from triaxtrack.influence import INFLUENCE_COLUMNS, observation_influence
+from triaxtrack.influence import (
+    CODEC_SHIFT_COLUMNS,
+    INFLUENCE_COLUMNS,
+    observation_influence,
+    observation_shift,
+)
 from triaxtrack.kit import design_points, load_kit_design, target_table
 from triaxtrack.optics import (
     Camera,
@@ -155,8 +161,10 @@ def _solve(
     mark_radius_mm: pd.Series | None = None,
 ):
     """Intersect and refine every id of ``obs`` (all rows used). Returns ids, group, xyz,
-    residuals, cov, the observations' eccentricities (N, 2; zero without ``mark_radius_mm``) and
-    their influences on their points (N, 3, mm; :func:`triaxtrack.influence.observation_influence`).
+    residuals, cov, the observations' eccentricities (N, 2; zero without ``mark_radius_mm``),
+    their influences on their points (N, 3, mm; :func:`triaxtrack.influence.observation_influence`)
+    and the points' shifts by the observations' ``codec_u_px`` and ``codec_v_px`` (N, 6, mm,
+    :data:`~triaxtrack.influence.CODEC_SHIFT_COLUMNS`; 0 where ``obs`` has no such columns).
 
     With ``mark_radius_mm`` (printed radius by ID, :func:`triaxtrack.eccentricity.mark_radii`),
     the refined points are corrected for the eccentricity of their marks' images: each
@@ -185,7 +193,14 @@ def _solve(
         step = -np.einsum("mij,mj->mi", np.nan_to_num(cov), Jtr)
         xyz = xyz + step
         r = r + np.einsum("nij,nj->ni", J, step[group])
-    return ids, group, xyz, r, cov, ecc, observation_influence(J, cov, group, r)
+    shift = np.zeros((len(obs), 6))
+    if all(c in obs.columns for c in CODEC_COLUMNS):
+        codec = obs[list(CODEC_COLUMNS)].to_numpy(float)
+        for a in (0, 1):
+            error = np.zeros((len(obs), 2))
+            error[:, a] = codec[:, a]
+            shift[:, 3 * a : 3 * a + 3] = observation_shift(J, cov, group, error)
+    return ids, group, xyz, r, cov, ecc, observation_influence(J, cov, group, r), shift
 
 
 def triangulate_refracted(
@@ -209,7 +224,11 @@ def triangulate_refracted(
     other frames, :func:`triaxtrack.timesteps.triangulate_frames`). ``du_px, dv_px`` are then the
     reprojection plus the eccentricity minus the observation, ``u_px, v_px`` as observed;
     ``ix_mm, iy_mm, iz_mm`` each used observation's influence on its point
-    (:func:`triaxtrack.influence.observation_influence`; NaN where not used).
+    (:func:`triaxtrack.influence.observation_influence`; NaN where not used). With the columns
+    ``codec_u_px, codec_v_px`` in ``observations`` (the codec correction's uncertainty,
+    :func:`triaxtrack.codec_lag.correct_lag`), the points have
+    :data:`~triaxtrack.influence.CODEC_SHIFT_COLUMNS`: their shifts by it, summed over their used
+    observations (:func:`triaxtrack.influence.shared_sigma`).
     """
     radii = mark_radius_mm if cfg.eccentricity and eccentricity_px is None else None
     keep = observations["camera"].isin(list(cameras)).to_numpy()
@@ -225,6 +244,7 @@ def triangulate_refracted(
     du = np.full(len(obs), np.nan)
     dv = np.full(len(obs), np.nan)
     influence = np.full((len(obs), 3), np.nan)
+    shift = np.zeros((len(obs), 6))
     todo = np.ones(len(all_ids), bool)  # points to solve (again): all, then those that lost a ray
     while todo.any():
         few = used & (np.bincount(gid[used], minlength=len(all_ids))[gid] < cfg.min_rays)
@@ -233,7 +253,8 @@ def triangulate_refracted(
         idx = np.flatnonzero(used & todo[gid])
         if idx.size == 0:
             break
-        ids, group, p, r, c, e, influence[idx] = _solve(cameras, solve_obs.iloc[idx], cell, cfg, radii)
+        solution = _solve(cameras, solve_obs.iloc[idx], cell, cfg, radii)
+        ids, group, p, r, c, e, influence[idx], shift[idx] = solution
         ecc[idx] = given[idx] + e
         k = np.searchsorted(all_ids, ids)
         xyz[k], cov[k] = p, c
@@ -259,9 +280,15 @@ def triangulate_refracted(
         "id": all_ids.astype(np.int64), "x_mm": xyz[:, 0], "y_mm": xyz[:, 1], "z_mm": xyz[:, 2],
         "n_rays": n_rays.astype(np.int64), "rms_px": np.sqrt(e2 / np.maximum(n_rays, 1)),
         "sigma_mm": np.maximum(sigma0, own) * np.sqrt(np.trace(cov, axis1=1, axis2=2)),
-    })[solved]  # fmt: skip
+    })  # fmt: skip
+    if all(c in obs.columns for c in CODEC_COLUMNS):
+        per_point = np.zeros((len(all_ids), 6))
+        np.add.at(per_point, gid[used], np.nan_to_num(shift[used]))
+        points = points.assign(**dict(zip(CODEC_SHIFT_COLUMNS, per_point.T, strict=True)))
+    points = points[solved]
     points = points[np.isfinite(points[["x_mm", "y_mm", "z_mm"]]).all(axis=1)].reset_index(drop=True)
     influence[~used] = np.nan
+    obs = obs.drop(columns=list(CODEC_COLUMNS), errors="ignore")
     residuals = obs.assign(du_px=du, dv_px=dv, used=used, reason=reason,
                            **dict(zip(INFLUENCE_COLUMNS, influence.T, strict=True)))  # fmt: skip
     return WaterTargets(points, residuals, sigma0, ecc)

@@ -24,6 +24,8 @@ from triaxtrack.codec_lag.measure import (
 
 MIN_SPREAD_KEYFRAMES = 3  # keyframes (of one side) whose scatter gives a pooled offset's standard error
 POOL_KEYFRAMES = 5  # a rigid body's offset is pooled over this many keyframes either side
+LEFT_COLUMNS = ("left_u0_px", "left_v0_px")  # a pooled offset's uncertainty left in the P frames
+CODEC_COLUMNS = ("codec_u_px", "codec_v_px")  # per observation: what its P frame's offset leaves
 
 
 def _coefficients(
@@ -127,8 +129,16 @@ def correct_lag(
     :func:`_coefficients`): forward along the dot's velocity by the lag, and back by the
     affine field; and the targets of each rigid body of ``bodies`` by its rows' offset
     ``(u0_px, v0_px)`` (give them pooled: :func:`pooled_offsets`). Keyframes, other targets
-    and frames with nothing measured are left as they are."""
+    and frames with nothing measured are left as they are.
+
+    The copy has two more columns, ``codec_u_px, codec_v_px``: for a rigid body's target in a P
+    frame, the standard uncertainty of its offset left after the correction (the rows'
+    ``left_u0_px, left_v0_px`` of :func:`pooled_offsets`, interpolated across the GOP as the
+    offsets are), an error every camera shares since the offset is pooled over them; 0
+    elsewhere (the membrane's departure, fitted on thousands of dots per camera, is not counted
+    here)."""
     out = tracks.copy()
+    out[list(CODEC_COLUMNS)] = 0.0
     rep = (out["reason"] == "").to_numpy()
     mem = (tracks["id"] >= FIRST_MEMBRANE_ID).to_numpy()
     frames, ids, uv = _positions(tracks[mem])
@@ -149,9 +159,14 @@ def correct_lag(
             continue
         frames = np.unique(out.loc[on, "frame"].to_numpy(np.int64))
         coef = np.nan_to_num(_coefficients(frames, keyframes, rows, rise=True))[:, [1, 4]]
+        one = np.unique(out.loc[on, "id"].to_numpy(np.int64))
         if coef.any():
-            one = np.unique(out.loc[on, "id"].to_numpy(np.int64))
             _move(out, on, frames, one, np.broadcast_to(coef[:, None, :], (len(frames), len(one), 2)))
+        if all(c in rows.columns for c in LEFT_COLUMNS):
+            left = rows.assign(u0_px=rows[LEFT_COLUMNS[0]], v0_px=rows[LEFT_COLUMNS[1]])
+            unc = np.nan_to_num(_coefficients(frames, keyframes, left, rise=True))[:, [1, 4]]
+            fi = np.searchsorted(frames, out.loc[on, "frame"].to_numpy(np.int64))
+            out.loc[on, list(CODEC_COLUMNS)] = unc[fi]
     return out
 
 
@@ -177,13 +192,14 @@ def pooled_offsets(lags: Mapping[str, pd.DataFrame]) -> dict[str, pd.DataFrame]:
     tables = {camera: t.reset_index(drop=True) for camera, t in lags.items()}
     rigid = [t[t["body"] != MEMBRANE].assign(camera=camera) for camera, t in tables.items()]
     every = pd.concat(rigid, ignore_index=True) if rigid else pd.DataFrame(columns=["body", "camera"])
-    out = {camera: t.copy() for camera, t in tables.items()}
+    out = {camera: t.assign(**dict.fromkeys(LEFT_COLUMNS, 0.0)) for camera, t in tables.items()}
+    cols = ["u0_px", "v0_px", *LEFT_COLUMNS]
     for _, rows in every.groupby("body"):
         pooled = _pooled_offsets(rows)
         for camera, part in pooled.groupby("camera"):
             mine = out[str(camera)]
             at = mine.index[mine["body"] == part["body"].iloc[0]]
-            mine.loc[at, ["u0_px", "v0_px"]] = part[["u0_px", "v0_px"]].to_numpy()
+            mine.loc[at, cols] = part[cols].to_numpy()
     return out
 
 
@@ -191,7 +207,8 @@ def _pooled_offsets(rows: pd.DataFrame) -> pd.DataFrame:
     """One rigid body's rows of :func:`estimate_lag` (any cameras) with each side's offset
     ``(u0_px, v0_px)`` replaced by its mean over the rows of that side within ``POOL_KEYFRAMES``
     keyframes either side where the body moved at a similar speed (:func:`_speeds_differ`: a
-    hold pools with holds), zeroed where within ``SIGNIFICANT_SIGMAS`` standard errors of zero.
+    hold pools with holds), zeroed where within ``SIGNIFICANT_SIGMAS`` standard errors of zero;
+    ``left_u0_px, left_v0_px`` what that leaves in the P frames (:func:`_pooled_value`).
     The mean's variance: with ``MIN_SPREAD_KEYFRAMES`` distinct keyframes or more, the scatter
     of their means (over the cameras) over their number, whatever the cameras share (but no
     less than the targets' spread over every row); with fewer, the rows' spread over their
@@ -209,7 +226,7 @@ def _pooled_offsets(rows: pd.DataFrame) -> pd.DataFrame:
     mean = srt[[c[0] for c in cols]].to_numpy(np.float64)  # (R, 2)
     own2 = np.nan_to_num(srt[[c[1] for c in cols]].to_numpy(np.float64) ** 2)
     shared2 = np.nan_to_num(srt[[c[2] for c in cols]].to_numpy(np.float64) ** 2)
-    pooled = np.zeros_like(mean)
+    pooled, left = np.zeros_like(mean), np.zeros_like(mean)
     for s in np.unique(side):
         lo_s, hi_s = np.searchsorted(side, s, "left"), np.searchsorted(side, s, "right")
         keys = np.unique(key[lo_s:hi_s])
@@ -220,16 +237,21 @@ def _pooled_offsets(rows: pd.DataFrame) -> pd.DataFrame:
             hi = lo_s + int(np.searchsorted(key[lo_s:hi_s], last, "right"))
             near = np.arange(lo, hi)
             near = near[~_speeds_differ(speed[i], speed_se[i], speed[near], speed_se[near])]
-            pooled[i] = _pooled_value(mean[near], own2[near], shared2[near], key[near])
+            pooled[i], left[i] = _pooled_value(mean[near], own2[near], shared2[near], key[near])
     out.loc[order, "u0_px"], out.loc[order, "v0_px"] = pooled[:, 0], pooled[:, 1]
+    out.loc[order, LEFT_COLUMNS[0]], out.loc[order, LEFT_COLUMNS[1]] = left[:, 0], left[:, 1]
     return out
 
 
-def _pooled_value(mean: np.ndarray, own2: np.ndarray, shared2: np.ndarray, key: np.ndarray) -> np.ndarray:
+def _pooled_value(
+    mean: np.ndarray, own2: np.ndarray, shared2: np.ndarray, key: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """The pooled offset (2,) of rows (``mean``, their squared standard errors from the targets'
     spread ``own2`` and from the frames' common jitter ``shared2``, (n, 2), at keyframes ``key``),
-    zeroed per axis where within ``SIGNIFICANT_SIGMAS`` standard errors of zero; see
-    :func:`_pooled_offsets`."""
+    zeroed per axis where within ``SIGNIFICANT_SIGMAS`` standard errors of zero (see
+    :func:`_pooled_offsets`), and the standard uncertainty (2,) it leaves in the P frames: its
+    standard error ``se`` where applied; where not, the offset not taken off as well,
+    ``sqrt(m^2 + se^2)`` (a known bias left uncorrected counts in full)."""
     n = len(mean)
     _, at = np.unique(key, return_inverse=True)
     k = int(at.max()) + 1
@@ -239,7 +261,8 @@ def _pooled_value(mean: np.ndarray, own2: np.ndarray, shared2: np.ndarray, key: 
         se = np.sqrt(np.maximum(per_key.var(axis=0, ddof=1) / k, own2.mean(axis=0) / n))
     else:  # too few to tell: the jitter taken as shared by every camera
         se = np.sqrt(own2.mean(axis=0) / n + shared2.mean(axis=0) / k)
-    return np.where(np.abs(m) >= SIGNIFICANT_SIGMAS * se, m, 0.0)
+    applied = np.abs(m) >= SIGNIFICANT_SIGMAS * se
+    return np.where(applied, m, 0.0), np.where(applied, se, np.hypot(m, se))
 
 
 def lag_corrected(
@@ -273,9 +296,10 @@ def corrected_tracks(tracks: pd.DataFrame, lags: Mapping[str, LagFile | tuple]) 
     """A copy of ``tracks`` (``TRACKS`` rows of any cameras, e.g. one chunk's) with each camera's
     P frames corrected by :func:`correct_lag` from its ``(keyframes, lags[, bodies])`` in
     ``lags`` (every keyframe of the test, so a GOP cut by the chunk is corrected from both its
-    ends), the rigid bodies' offsets pooled over the cameras (:func:`pooled_offsets`); cameras
-    not in ``lags`` are left as they are."""
-    out = tracks.copy()
+    ends), the rigid bodies' offsets pooled over the cameras (:func:`pooled_offsets`), with
+    :func:`correct_lag`'s ``codec_u_px, codec_v_px`` (0 for cameras not in ``lags``, which are
+    left as they are)."""
+    out = tracks.assign(**dict.fromkeys(CODEC_COLUMNS, 0.0))
     if tracks.empty:
         return out
     span = (int(tracks["frame"].min()), int(tracks["frame"].max()))
@@ -284,5 +308,6 @@ def corrected_tracks(tracks: pd.DataFrame, lags: Mapping[str, LagFile | tuple]) 
         if camera in lags:
             keys, _, *bodies = lags[camera]
             fixed = correct_lag(tracks.iloc[pos], keys, pooled[camera], *bodies)
-            out.iloc[pos, out.columns.get_indexer(["u_px", "v_px"])] = fixed[["u_px", "v_px"]].to_numpy()
+            cols = ["u_px", "v_px", *CODEC_COLUMNS]
+            out.iloc[pos, out.columns.get_indexer(cols)] = fixed[cols].to_numpy()
     return out

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from triaxtrack.influence import INFLUENCE_COLUMNS
+from triaxtrack.influence import CODEC_SHIFT_COLUMNS, INFLUENCE_COLUMNS
 from triaxtrack.kit import load_kit_design, target_table
 from triaxtrack.tables import (
     OBSERVATIONS,
@@ -82,7 +82,8 @@ def _measure_frame(
     influence: pd.DataFrame | None = None,
 ) -> tuple[MembraneGrid, TopCap, VolumeResult, VolumeUncertainty, object]:
     """One frame's (``pf``) filled grid, top cap, soil volume (mm^3), its uncertainty (with the
-    frame's observations' ``influence``, :func:`volume_uncertainty`) and whether its dot mesh is
+    frame's observations' ``influence`` and the points' codec shifts where ``pf`` has them,
+    :func:`volume_uncertainty`) and whether its dot mesh is
     watertight (<NA> unless ``check``), the membrane thinned from ``t0`` (mm) against the
     reference grid ``grid0`` (None: this frame is the reference). Raises ``FAILURES`` when the
     frame cannot be measured."""
@@ -90,11 +91,12 @@ def _measure_frame(
     thickness = membrane_thickness(grid, grid if grid0 is None else grid0, t0, model=thickness_model)
     res = specimen_volume(grid, cap, thickness, levels)
     gradient = None
-    if influence is not None:
+    shifts = pf[["id", *CODEC_SHIFT_COLUMNS]] if all(c in pf.columns for c in CODEC_SHIFT_COLUMNS) else None
+    if influence is not None or shifts is not None:
         cap_ids = table.loc[table["surface"] == "pedestal_top", "id"]
         on_cap = pf.loc[pf["id"].isin(cap_ids)].dropna(subset=["x_mm", "y_mm", "z_mm"])["id"].unique()
         gradient = volume_gradient(grid, grid_ids(table), cap, on_cap, res.volume_mm3)
-    unc = volume_uncertainty(grid, ends, cap, res.volume_mm3, influence, gradient)
+    unc = volume_uncertainty(grid, ends, cap, res.volume_mm3, influence, gradient, shifts)
     watertight = check_mesh(*closed_mesh(grid, cap))["watertight"] if check else pd.NA
     return grid, cap, res, unc, watertight
 

@@ -1,6 +1,6 @@
 """Standard uncertainty (1-sigma, mm^3) of one frame's soil volume.
 
-Three independent parts, added in quadrature:
+Four independent parts, added in quadrature:
 
 * ``measured``: the measured dots' and the top cap's position errors, the larger of two
   estimates:
@@ -20,6 +20,13 @@ Three independent parts, added in quadrature:
     rigid fit's residual (``rms / sqrt(3 n - 6)``), times dV/dh taken as the mean
     cross-section V / h (``cap_mm3``). It is what is left with no influences (observations
     not given) and a floor under the cluster estimate, which rests on a dozen cameras.
+* ``codec``: the codec correction's own uncertainty (:mod:`triaxtrack.codec_lag`: a rigid
+  body's P-frame offset is pooled over every camera, so its error is in every camera at once,
+  and where it is too uncertain to be taken off, the offset measured is left in the P frames),
+  which no residual shows: the points' shifts by it (points.parquet's ``codec_*_mm``) times the
+  gradient above, summed over every point (:func:`triaxtrack.influence.shared_sigma`). On a
+  clean 1080p test with two keyframes, the top cap's offset (-0.014 px in every camera) is
+  left in, and reads the cap 2.8 micrometres low in every P frame.
 * ``fill``: the error of the filled dots, by a leave-out check on this frame's measured dots.
   Every gap (connected set of missing dots) is moved, with all the others, to other places of
   the grid -- turned by multiples of 1/8 turn, and mirrored top to bottom (an end band onto the
@@ -29,10 +36,10 @@ Three independent parts, added in quadrature:
   independent. A gap with no place to go borrows the worst error per area seen elsewhere; with
   no sample at all the fill's part is unknown (NaN).
 
-Not included: errors every camera shares (the cell's refraction model, a bias of every centroid
-alike: :mod:`triaxtrack.influence`), the method's own discretisation error (2.8e-7 of the volume
-on a loaded simulator frame) and, in a shear band, the membrane thickness model's error (about
-1e-5 of the volume).
+Not included: other errors every camera shares (the cell's refraction model, a bias of every
+centroid alike: :mod:`triaxtrack.influence`; the membrane's codec departure, fitted per
+camera), the method's own discretisation error (2.8e-7 of the volume on a loaded simulator
+frame) and, in a shear band, the membrane thickness model's error (about 1e-5 of the volume).
 """
 
 from __future__ import annotations
@@ -42,7 +49,7 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from triaxtrack.influence import cluster_sigma
+from triaxtrack.influence import cluster_sigma, shared_sigma
 from triaxtrack.volume.cap import TopCap
 from triaxtrack.volume.grid import FaceEnds, MembraneGrid, fill_grid, gap_labels
 
@@ -62,6 +69,7 @@ class VolumeUncertainty:
     fill_samples: int
     cameras_mm3: float = float("nan")  # the cluster estimate (NaN: no influences given)
     cameras: int = 0  # the cameras that contribute to it
+    codec_mm3: float = 0.0  # the codec correction's part (0: no shifts given)
 
 
 def dot_areas(xyz: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -155,12 +163,15 @@ def volume_uncertainty(
     volume_mm3: float,
     influence: pd.DataFrame | None = None,
     gradient: pd.DataFrame | None = None,
+    shifts: pd.DataFrame | None = None,
 ) -> VolumeUncertainty:
     """1-sigma standard uncertainty of one frame's soil volume ``volume_mm3`` (mm^3) measured
     from ``grid`` (filled with ``ends``) and ``cap``; with this frame's observations'
     ``influence`` (rows ``camera, id, ix_mm, iy_mm, iz_mm``) and the volume's ``gradient``
     (:func:`volume_gradient`), the measured part is the larger of the cameras' cluster estimate
-    and the independent model; see the module docstring."""
+    and the independent model; with the points' codec ``shifts`` (rows ``id`` and
+    :data:`~triaxtrack.influence.CODEC_SHIFT_COLUMNS`) and the ``gradient``, the codec's part is
+    added; see the module docstring."""
     area, normal = dot_areas(np.asarray(grid.xyz, float))
     m = np.asarray(grid.measured)
     noise = point_noise_mm(grid, normal)
@@ -177,5 +188,6 @@ def volume_uncertainty(
     if influence is not None and gradient is not None and len(influence):
         cameras, n_cameras = cluster_sigma(influence, gradient)
     part = max(independent, cameras) if np.isfinite(cameras) else independent
-    total = float(np.hypot(part, fill))
-    return VolumeUncertainty(total, measured, fill, float(cap_part), n_samples, cameras, n_cameras)
+    codec = shared_sigma(shifts, gradient) if shifts is not None and gradient is not None else 0.0
+    total = float(np.sqrt(part**2 + fill**2 + codec**2))
+    return VolumeUncertainty(total, measured, fill, float(cap_part), n_samples, cameras, n_cameras, codec)
