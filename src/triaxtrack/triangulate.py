@@ -269,29 +269,47 @@ def triangulate_refracted(
         used[idx[worst]] = False
         todo[:] = False
         todo[gid[idx[worst]]] = True
-    n_rays = np.bincount(gid[used], minlength=len(all_ids))
-    e2 = np.bincount(gid[used], weights=du[used] ** 2 + dv[used] ** 2, minlength=len(all_ids))
-    solved = n_rays >= cfg.min_rays
-    dof = max(2 * n_rays[solved].sum() - 3 * solved.sum(), 1)
-    sigma0 = float(np.sqrt(e2[solved].sum() / dof))
-    # a point whose own rays disagree more than the image noise says so in its uncertainty
-    own = np.sqrt(e2 / np.maximum(2 * n_rays - 3, 1))
-    points = pd.DataFrame({
-        "id": all_ids.astype(np.int64), "x_mm": xyz[:, 0], "y_mm": xyz[:, 1], "z_mm": xyz[:, 2],
-        "n_rays": n_rays.astype(np.int64), "rms_px": np.sqrt(e2 / np.maximum(n_rays, 1)),
-        "sigma_mm": np.maximum(sigma0, own) * np.sqrt(np.trace(cov, axis1=1, axis2=2)),
-    })  # fmt: skip
-    if all(c in obs.columns for c in CODEC_COLUMNS):
-        per_point = np.zeros((len(all_ids), 6))
-        np.add.at(per_point, gid[used], np.nan_to_num(shift[used]))
-        points = points.assign(**dict(zip(CODEC_SHIFT_COLUMNS, per_point.T, strict=True)))
-    points = points[solved]
-    points = points[np.isfinite(points[["x_mm", "y_mm", "z_mm"]]).all(axis=1)].reset_index(drop=True)
+    codec = shift if all(c in obs.columns for c in CODEC_COLUMNS) else None
+    points, sigma0 = _point_table(all_ids, xyz, cov, gid, used, np.hypot(du, dv), cfg.min_rays, codec)
     influence[~used] = np.nan
     obs = obs.drop(columns=list(CODEC_COLUMNS), errors="ignore")
     residuals = obs.assign(du_px=du, dv_px=dv, used=used, reason=reason,
                            **dict(zip(INFLUENCE_COLUMNS, influence.T, strict=True)))  # fmt: skip
     return WaterTargets(points, residuals, sigma0, ecc)
+
+
+def _point_table(
+    ids: np.ndarray,
+    xyz: np.ndarray,
+    cov: np.ndarray,
+    gid: np.ndarray,
+    used: np.ndarray,
+    resid: np.ndarray,
+    min_rays: int,
+    codec: np.ndarray | None = None,
+) -> tuple[pd.DataFrame, float]:
+    """The solved points of :func:`triangulate_refracted` (``ids`` with their ``xyz`` and
+    ``cov``; observations' point ``gid``, ``used`` and residual length ``resid``, px) with at
+    least ``min_rays`` rays and a finite position, and the a-posteriori image noise. With the
+    observations' ``codec`` shifts (N, 6), each point's sum over its used observations."""
+    n_rays = np.bincount(gid[used], minlength=len(ids))
+    e2 = np.bincount(gid[used], weights=resid[used] ** 2, minlength=len(ids))
+    solved = n_rays >= min_rays
+    dof = max(2 * n_rays[solved].sum() - 3 * solved.sum(), 1)
+    sigma0 = float(np.sqrt(e2[solved].sum() / dof))
+    # a point whose own rays disagree more than the image noise says so in its uncertainty
+    own = np.sqrt(e2 / np.maximum(2 * n_rays - 3, 1))
+    points = pd.DataFrame({
+        "id": ids.astype(np.int64), "x_mm": xyz[:, 0], "y_mm": xyz[:, 1], "z_mm": xyz[:, 2],
+        "n_rays": n_rays.astype(np.int64), "rms_px": np.sqrt(e2 / np.maximum(n_rays, 1)),
+        "sigma_mm": np.maximum(sigma0, own) * np.sqrt(np.trace(cov, axis1=1, axis2=2)),
+    })  # fmt: skip
+    if codec is not None:
+        per_point = np.zeros((len(ids), 6))
+        np.add.at(per_point, gid[used], np.nan_to_num(codec[used]))
+        points = points.assign(**dict(zip(CODEC_SHIFT_COLUMNS, per_point.T, strict=True)))
+    points = points[solved]
+    return points[np.isfinite(points[["x_mm", "y_mm", "z_mm"]]).all(axis=1)].reset_index(drop=True), sigma0
 
 
 def _sample_ids(ids: np.ndarray, n: int) -> np.ndarray:
