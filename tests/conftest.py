@@ -7,12 +7,13 @@ from pathlib import Path
 import pytest
 
 from triaxtrack.kit import export_kit, load_design, target_table
+from triaxtrack.kit_design import KitDesign
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
 @pytest.fixture(scope="session")
-def design() -> dict:
+def design() -> KitDesign:
     return load_design(ROOT / "config" / "kit.yaml")
 
 

@@ -28,6 +28,7 @@ from triaxtrack.calibrate import (
 )
 from triaxtrack.cli import main
 from triaxtrack.kit import board_corners_mm, load_design
+from triaxtrack.kit_design import BoardDesign
 from triaxtrack.optics import (
     Camera,
     normalized_to_pixels,
@@ -134,7 +135,7 @@ def test_partial_boards_are_found_with_consistent_indices(boards):
             assert len(view.corners_px) >= 0.7 * seen, (cam, name, len(view.corners_px), seen)
             idx, dist = matched(view.corners_px, truth)
             assert dist.max() < 0.1 and len(set(idx)) == len(idx), (cam, name, dist.max())
-            own = grid_indices(view.object_mm, board["square_mm"])
+            own = grid_indices(view.object_mm, board.square_mm)
             board_ij = np.c_[idx % nx, idx // nx]
             A, *_ = np.linalg.lstsq(np.c_[own, np.ones(len(own))], board_ij, rcond=None)
             np.testing.assert_allclose(np.c_[own, np.ones(len(own))] @ A, board_ij, atol=1e-6)
@@ -152,7 +153,7 @@ def test_second_pass_refines_through_the_lens(boards, calibrations):
     for name, truth in {**true_corners(boards, "cam01"), **true_corners(boards, "cam01", "corner")}.items():
         image = gray(boards, "cam01", name)
         view = find_board(image, board, name)
-        uv, _ = refine_view(image, view.corners_px, view.object_mm, board["square_mm"], K, dist)
+        uv, _ = refine_view(image, view.corners_px, view.object_mm, board.square_mm, K, dist)
         first.append(matched(view.corners_px, truth)[1])
         second.append(matched(uv, truth)[1])
     first, second = np.concatenate(first), np.concatenate(second)
@@ -182,7 +183,7 @@ def test_two_stage_fit_with_partial_views_in_their_own_frames():
     reproduce the camera exactly from exact corners; with 0.005 px noise they bring the
     undistortion map within 0.03 px (0.009-0.029 px when written; whole boards alone:
     0.04-0.23 px)."""
-    board = load_design(Path(__file__).resolve().parents[1] / "config" / "kit.yaml")["board"]
+    board = load_design(Path(__file__).resolve().parents[1] / "config" / "kit.yaml").board
     cfg = SimulationConfig(cameras=3, width=960, height=540)
     obj = board_corners_mm(board)
     size = (960, 540)
@@ -198,8 +199,8 @@ def test_two_stage_fit_with_partial_views_in_their_own_frames():
                 if seen.all():
                     views.append(BoardImage(f"{i}", uv, obj, whole=True))
                 else:
-                    ij = grid_indices(obj[seen], board["square_mm"])
-                    own = np.c_[-ij[:, 1] + 7, ij[:, 0] - 3, np.zeros(len(ij))] * board["square_mm"]
+                    ij = grid_indices(obj[seen], board.square_mm)
+                    own = np.c_[-ij[:, 1] + 7, ij[:, 0] - 3, np.zeros(len(ij))] * board.square_mm
                     views.append(BoardImage(f"{i}", uv[seen], own, whole=False))
             assert sum(v.whole for v in views) == 12
             _, K, dist, per_view = fit_views(views, board, size, "standard")
@@ -227,7 +228,7 @@ def test_two_stage_fit_starts_from_the_whole_boards(monkeypatch):
     monkeypatch.setattr(calibrate.cv2, "calibrateCameraExtended", spy)
     K = np.array([[600.0, 0, 479.5], [0, 600.0, 269.5], [0, 0, 1]])
     cam = Camera("c", 960, 540, K, np.array([-0.3, 0.08, 0, 0, 0.0]), np.eye(3), np.zeros(3))
-    board = {"squares_x": 16, "squares_y": 11, "square_mm": 12.5, "margin_mm": 20.0}
+    board = BoardDesign(squares_x=16, squares_y=11, square_mm=12.5, margin_mm=20.0)
     obj = board_corners_mm(board)
     views = []
     for i, (R, t) in enumerate(board_poses(SimulationConfig(), cam, board, 12)):

@@ -128,7 +128,7 @@ def test_the_cell_fitted_in_air_from_exact_centroids_has_its_printed_radius(desi
     labels = pd.DataFrame(rows, columns=["camera", "frame", "id", "u_px", "v_px"])
     intrinsics = {n: Camera(n, c.width, c.height, c.K, c.dist, np.eye(3), np.zeros(3))
                   for n, c in cameras.items()}  # fmt: skip
-    printed = design["cell"]["outer_radius"]
+    printed = design.cell.outer_radius
     plain = reconstruct_cell(intrinsics, labels, wall, SfmConfig(), mark_radius_mm=None)
     fixed = reconstruct_cell(intrinsics, labels, wall, SfmConfig(), mark_radius_mm=radii)
     assert plain.cylinder.radius - printed < -0.004  # -6 micrometres, as on the demo

@@ -38,18 +38,23 @@ from triaxtrack.identify.cell import _over_chain_neighbours, _row_pitch_px, _str
 from triaxtrack.identify.coded import _ct_stripes, _plausible_cts
 from triaxtrack.identify.state import UNLABELLED
 from triaxtrack.kit import coded_target_polygons, ct_codes, load_kit_design, target_table
+from triaxtrack.kit_design import CodedTargetDesign, MembraneDesign
 from triaxtrack.optics import read_cameras
 from triaxtrack.raster import paint
 from triaxtrack.score import ScoreTolerances, score_identification
 from triaxtrack.video import read_frame
 
 PX_PER_MM = 6.0
+MEMBRANE = MembraneDesign(first_id=1001, columns=64, rows=60, theta0=0.0, small_dot_diameter=1.6,
+                          large_dot_diameter=2.0, large_first=1, large_step=4)  # fmt: skip
 CARD = DetectParams(background_px=40)  # the local white level is measured over more than a CT
 
 
-def _ct_image(word: int, ct: dict, flip: tuple[int, ...] = (), roll_deg: float = 20.0) -> np.ndarray:
+def _ct_image(
+    word: int, ct: CodedTargetDesign, flip: tuple[int, ...] = (), roll_deg: float = 20.0
+) -> np.ndarray:
     """A white card with one CT at 6 px/mm, rolled, some sectors inverted (misprinted)."""
-    n = ct["sectors"]
+    n = ct.sectors
     bits = bits_of(word, n)
     for k in flip:
         bits[k] ^= 1
@@ -73,15 +78,15 @@ def kit(kit_dir):
 def test_ring_code_read_at_any_roll(kit):
     design, _, codes = kit
     for tid, roll in ((7, 0.0), (23, 33.0), (117, 200.0), (152, 301.0)):
-        img = _ct_image(codes[tid], design["coded_target"], roll_deg=roll)
-        cts = decode_coded_targets(img, detect_blobs(img, CARD), codes, design["coded_target"])
+        img = _ct_image(codes[tid], design.coded_target, roll_deg=roll)
+        cts = decode_coded_targets(img, detect_blobs(img, CARD), codes, design.coded_target)
         assert cts.id.tolist() == [tid]
         assert np.hypot(cts.u_px[0] - 60, cts.v_px[0] - 60) < 0.05  # centre dot's centroid
 
 
 def test_misprinted_sectors_are_never_misread(kit):
     design, _, codes = kit
-    ct = design["coded_target"]
+    ct = design.coded_target
     one = _ct_image(codes[20], ct, flip=(3,))
     cts = decode_coded_targets(one, detect_blobs(one, CARD), codes, ct)
     assert cts.id.tolist() in ([20], [])  # corrected, or rejected: never another ID
@@ -100,8 +105,8 @@ def test_a_ct_cut_by_the_image_border_is_read_from_the_sectors_inside(kit, roll)
     degrees, one sector out, codes 7, 30 and 160); cut to under CT_MIN_KNOWN_FRACTION of them,
     it is not read at all. Never misread, also with two sectors misprinted."""
     design, _, codes = kit
-    ct = design["coded_target"]
-    n = ct["sectors"]
+    ct = design.coded_target
+    n = ct.sectors
     read = set()
     for tid in (7, 23, 30, 117, 152, 160):
         img = _ct_image(codes[tid], ct, roll_deg=roll)
@@ -262,17 +267,17 @@ def test_rows_are_counted_from_a_pedestal_face_only_nearby(kit, rows_below, spac
     its rows are ``spacing`` = 4 design pitches apart (the larger dots alone, where the small
     ones are too small to resolve), outside ROW_PITCH_RANGE."""
     design, _, _ = kit
-    m = design["membrane"]
-    z_from_face = design["pedestal_targets"]["stripes"][0]["z_from_face"]
-    rc = design["coded_target"]["centre_radius"]
+    m = design.membrane
+    z_from_face = design.pedestal_targets.stripes[0].z_from_face
+    rc = design.coded_target.centre_radius
     s, pitch, col = 3.0, 2.37 * spacing, 3.5 * spacing  # px/mm, row and column pitch (mm)
     nodes = np.array([(i, j) for i in range(10) for j in range(12)])
     pos = np.c_[100 + nodes[:, 1] * col * s, 100 + nodes[:, 0] * pitch * s].astype(float)
     grid = {(int(i), int(j)): k for k, (i, j) in enumerate(nodes)}
     jc = 4  # a larger-dot column (phase 0) under the CT
     ct = np.array([100 + jc * col * s, pos[:, 1].max() + (pitch / 2 + z_from_face + rows_below * pitch) * s])
-    r_first = m["rows"] + 0.5 - (0.5 + rows_below)  # the truth: the last grid row's design row
-    phase = ((m["large_first"] - int(r_first - 9)) % m["large_step"], (jc - 0) % m["large_step"])
+    r_first = m.rows + 0.5 - (0.5 + rows_below)  # the truth: the last grid row's design row
+    phase = ((m.large_first - int(r_first - 9)) % m.large_step, (jc - 0) % m.large_step)
     an = _Anchor(1, None, (ct, np.eye(2) * rc * s))
     ctx = _MembraneView(axis_point=pos.mean(axis=0), q_max=1.0, proud_mm=3.0, column_mm=col)
     p = IdentifyParams()
@@ -328,7 +333,7 @@ def test_a_stripe_is_told_from_a_membrane_column_by_its_spacing(kit):
 
 def test_membrane_row_ends():
     """The first and last dot of each labelled run along a row (around the specimen) are ends."""
-    m = {"first_id": 1001, "rows": 60, "columns": 64}
+    m = MEMBRANE
     ids = np.array([1001 + 64 * r + c for r in (9, 10) for c in (62, 63, 0, 1, 2)] + [131, -1])
     ends, gaps = _membrane_row_ends(ids, m)
     assert ends.tolist() == [True, False, False, False, True] * 2 + [False, False]
@@ -338,7 +343,7 @@ def test_membrane_row_ends():
 def test_membrane_row_gaps_in_an_end_row():
     """In an end row, a run's end whose missing neighbour has a labelled neighbour towards the
     middle rows is beside a gap (a lost dot); one at the silhouette, or in another row, is not."""
-    m = {"first_id": 1001, "rows": 60, "columns": 64}
+    m = MEMBRANE
     bottom = [1001 + 64 * 59 + c for c in (10, 11, 13, 14)]  # column 12 lost, row 59 whole
     above = [1001 + 64 * 58 + c for c in range(10, 15)]
     top = [1001 + c for c in (20, 21, 23)] + [1001 + 64 + c for c in (20, 21)]  # column 22 hidden
@@ -351,7 +356,7 @@ def test_a_rows_chain_alone_is_not_confirmed():
     """A membrane dot with no labelled dot above or below it in its column (the top row's run
     past the second row's end, towards a silhouette) is unconfirmed; one with a neighbour in the
     next row, in an end row or not, and a cell-wall ID are confirmed."""
-    m = {"first_id": 1001, "rows": 60, "columns": 64}
+    m = MEMBRANE
     top = [1001 + c for c in (36, 37, 38, 39)]  # row 0, columns 36-39
     second = [1001 + 64 + c for c in (35, 36, 37)]  # row 1 ends at column 37
     bottom = [1001 + 64 * 59 + 5, 1001 + 64 * 58 + 5]  # the last row, its column's dot above
@@ -362,7 +367,7 @@ def test_a_rows_chain_alone_is_not_confirmed():
 def test_roundness_compared_with_the_grid_neighbours():
     """A membrane dot's roundness over the median of its labelled row and column neighbours
     (around the specimen: column 64 is beside column 1); NaN for other IDs and lone dots."""
-    m = {"first_id": 1001, "rows": 60, "columns": 64}
+    m = MEMBRANE
     ids = np.array([1001 + 64 * 9, 1002 + 64 * 9, 1064 + 64 * 9, 1001 + 64 * 10, 1064, 131])
     ratio = _over_neighbours(ids, np.array([0.4, 0.8, 1.0, 0.9, 0.5, 0.7]), m)
     assert np.allclose(ratio[:4], [0.4 / 0.9, 0.8 / 0.4, 1.0 / 0.4, 0.9 / 0.4])
@@ -406,11 +411,11 @@ def test_region_beyond_a_band_is_fixed_along_curved_rows(kit):
     one facing column than at the other, so a straight match across pairs the wrong rows. Each
     row's tangent, extrapolated to the middle of the gap from both sides, pairs the right ones."""
     design = kit[0]
-    m = design["membrane"]
+    m = design.membrane
     pos = []
     fixed = _membrane_patch(range(5, 26), range(10, 20), 0, 0, pos)  # offsets (0, 0): node = (r, c)
     beyond = _membrane_patch(range(5, 26), range(23, 27), 3, 20, pos)
-    phase = ((m["large_first"] - 3) % m["large_step"], (m["large_first"] - 20) % m["large_step"])
+    phase = ((m.large_first - 3) % m.large_step, (m.large_first - 20) % m.large_step)
     got = _bridge(beyond, phase, fixed, (0, 0), np.asarray(pos), np.array([0.0, 1.0]), design)
     assert got == (20, 3)
 
@@ -438,11 +443,11 @@ def test_columns_hidden_by_a_band_counted_from_the_spacing_row_by_row(kit):
     facing columns, over different rows, lie 17 px apart; row by row they are 5 px apart, which
     counts the four columns from one facing column to the other."""
     design = kit[0]
-    m = design["membrane"]
+    m = design.membrane
     fixed, beyond, pos = _patches_across_a_band(
         lambda r: r <= 15, lambda c, r: 221.0 + 5.0 * (c - 23) + 0.3 * (8.0 * r - 120.0)
     )
-    phase = ((m["large_first"] - 3) % m["large_step"], (m["large_first"] - 20) % m["large_step"])
+    phase = ((m.large_first - 3) % m.large_step, (m.large_first - 20) % m.large_step)
     assert _bridge(beyond, phase, fixed, (0, 0), pos, np.array([0.0, 1.0]), design) == (20, 3)
 
 
@@ -450,9 +455,9 @@ def test_a_sparse_column_beside_a_band_is_passed_over(kit):
     """The region's column facing the band holds three dots (broken up beside the band): the
     rows are matched from the next column in, and the hidden columns counted from there."""
     design = kit[0]
-    m = design["membrane"]
+    m = design.membrane
     fixed, beyond, pos = _patches_across_a_band(lambda r: r in (8, 14, 20), lambda c, r: 10.0 * c)
-    phase = ((m["large_first"] - 3) % m["large_step"], (m["large_first"] - 20) % m["large_step"])
+    phase = ((m.large_first - 3) % m.large_step, (m.large_first - 20) % m.large_step)
     assert _bridge(beyond, phase, fixed, (0, 0), pos, np.array([0.0, 1.0]), design) == (20, 3)
 
 
@@ -555,7 +560,7 @@ def test_a_merged_pair_between_labelled_column_neighbours_is_labelled():
     """U, A, B, D down a membrane column with U and D labelled and A, B merged in one blob: A
     and B get their IDs (U + 64, U + 128) at their fitted centres, with the merged pairs' lower
     quality, and the merged blob stays unlabelled with a reason. Without D, nothing is fitted."""
-    m = {"first_id": 1001, "rows": 60, "columns": 64}
+    m = MEMBRANE
     img = _column_of_dots(COLUMN_V[:4], COLUMN_AXES[:4])
     truth = np.array([[20.3, v] for v in COLUMN_V[1:3]])
     blobs = detect_blobs(img, DetectParams(background_px=16)).sort_values("v_px", ignore_index=True)
@@ -586,26 +591,26 @@ def test_a_stripe_end_is_not_anchored_far_from_a_borrowed_scale(kit):
     from triaxtrack.kit import eq1_dot_id
 
     design = kit[0]
-    cell = design["cell_targets"]
-    ls = cell["longitudinal_stripes"][1]
-    top, bottom = cell["ct_stripes"][0], cell["ct_stripes"][-1]
-    n, zt, zb = ls["count"], cell["longitudinal_z_top"], cell["longitudinal_z_bottom"]
+    cell = design.cell_targets
+    ls = cell.longitudinal_stripes[1]
+    top, bottom = cell.ct_stripes[0], cell.ct_stripes[-1]
+    n, zt, zb = ls.count, cell.longitudinal_z_top, cell.longitudinal_z_bottom
     spacing = (zt - zb) / (n - 1)
     s = 7.0  # px per mm down the cell
 
     def px(z, u=400.0):
         return np.array([u, 100.0 + s * (zt + 20.0 - z)])
 
-    ct_top = ls["ct"]
-    ct_bottom = ct_top - top["first_id"] + bottom["first_id"]
-    rows = [(eq1_dot_id(ct_top, design), px(top["z"] - cell["dot_offset"]))]
-    rows += [(eq1_dot_id(ct_bottom, design), px(bottom["z"] - cell["dot_offset"]))]
+    ct_top = ls.ct
+    ct_bottom = ct_top - top.first_id + bottom.first_id
+    rows = [(eq1_dot_id(ct_top, design), px(top.z - cell.dot_offset))]
+    rows += [(eq1_dot_id(ct_bottom, design), px(bottom.z - cell.dot_offset))]
     rows += [(-(k + 10), px(zt - k * spacing)) for k in range(n - 1)]  # the stripe, last dot hidden
     # the neighbour CTs (decoded) one place round, their Eq. 1 dots 9 mm below at 1.09 x the scale
     centres = {}
-    for ct, z in ((ct_top + 1, top["z"]), (ct_bottom + 1, bottom["z"])):
+    for ct, z in ((ct_top + 1, top.z), (ct_bottom + 1, bottom.z)):
         centres[ct] = (px(z, 460.0), None)
-        rows.append((eq1_dot_id(ct, design), px(z, 460.0) + [0.0, 1.09 * s * cell["dot_offset"]]))
+        rows.append((eq1_dot_id(ct, design), px(z, 460.0) + [0.0, 1.09 * s * cell.dot_offset]))
     pos = np.array([p for _, p in rows])
     ids = np.array([t if t > 0 else UNLABELLED for t, _ in rows], np.int64)
     blobs = pd.DataFrame({"area_px": 20.0, "background": 200.0, "roundness": 0.5}, index=range(len(pos)))
@@ -614,7 +619,7 @@ def test_a_stripe_end_is_not_anchored_far_from_a_borrowed_scale(kit):
     pool = _Pool(pos, ids == UNLABELLED, blobs)
     _label_longitudinal(f, pool, centres, design, IdentifyParams())
     stripe = np.array([t for t, _ in rows]) < 0
-    truth = ls["first_id"] + (-np.array([t for t, _ in rows])[stripe] - 10)
+    truth = ls.first_id + (-np.array([t for t, _ in rows])[stripe] - 10)
     got = f.ids[stripe]
     assert (got == truth).sum() >= n // 2  # grown down from the top anchor
     assert ((got == truth) | (got == UNLABELLED)).all()

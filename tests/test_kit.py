@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 
 import cv2
 import numpy as np
@@ -37,7 +38,7 @@ def test_eq1_examples_and_geometry(design, table):
         dot = eq1_dot_id(ct, design)
         assert t.loc[dot, "large"]
         assert t.loc[dot, "theta_rad"] == pytest.approx(t.loc[ct, "theta_rad"], abs=1e-12)
-        assert t.loc[dot, "z_mm"] == pytest.approx(t.loc[ct, "z_mm"] - design["cell_targets"]["dot_offset"])
+        assert t.loc[dot, "z_mm"] == pytest.approx(t.loc[ct, "z_mm"] - design.cell_targets.dot_offset)
         # the three smaller dots between follow in theta
         assert not t.loc[[dot + 1, dot + 2, dot + 3], "large"].any()
     # pedestal pairs differ by 16 and share theta; CT 17 is on +x
@@ -47,7 +48,7 @@ def test_eq1_examples_and_geometry(design, table):
 
 
 def test_membrane_equations(design, table):
-    m = design["membrane"]
+    m = design.membrane
     t = table.set_index("id")
     assert membrane_id(1, 1, m) == 1001 and membrane_id(60, 64, m) == 4840
     assert membrane_id(2, 1, m) == 1065
@@ -142,7 +143,7 @@ def test_sheets_print_targets_across_theta_zero(kit_dir):
 def test_pedestal_theta0_must_be_zero(design):
     from triaxtrack.kit import target_table
 
-    bad = {**design, "pedestal_targets": {**design["pedestal_targets"], "theta0": 5.0}}
+    bad = replace(design, pedestal_targets=replace(design.pedestal_targets, theta0=5.0))
     with pytest.raises(ValueError, match="CT 17"):
         target_table(bad)
 

@@ -3,9 +3,9 @@ IDs, size), and no figure or report code holds a kit's counts as constants."""
 
 from __future__ import annotations
 
-import copy
 import io
 import tokenize
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -14,6 +14,7 @@ from matplotlib.collections import QuadMesh
 from test_report import FRAMES, points_table, strains_table, tracks_table
 
 from triaxtrack.kit import load_kit_design, target_table
+from triaxtrack.kit_design import KitDesign
 from triaxtrack.report import (
     figure_image,
     membrane_layout,
@@ -32,13 +33,11 @@ FIGURE_CODE += [SRC / "camera_report.py", SRC / "plots.py"]
 
 
 @pytest.fixture(scope="module")
-def other_design(design) -> dict:
+def other_design(design: KitDesign) -> KitDesign:
     """A kit unlike the default one: a smaller specimen with a coarser membrane grid whose IDs
     start elsewhere."""
-    other = copy.deepcopy(design)
-    other["membrane"].update(rows=30, columns=48, first_id=5001, large_first=2, large_step=5)
-    other["specimen"].update(diameter=50.0, height=100.0)
-    return other
+    membrane = replace(design.membrane, rows=30, columns=48, first_id=5001, large_first=2, large_step=5)
+    return replace(design, membrane=membrane, specimen=replace(design.specimen, diameter=50.0, height=100.0))
 
 
 @pytest.fixture(scope="module")
@@ -52,12 +51,12 @@ def other(other_design):
 
 
 def test_layout_is_the_kits(design, layout, kit_dir):
-    m = design["membrane"]
+    m = design.membrane
     table = target_table(design)
     mem = table[table["surface"] == "membrane"]
-    assert (layout.rows, layout.columns, layout.first_id) == (m["rows"], m["columns"], m["first_id"])
+    assert (layout.rows, layout.columns, layout.first_id) == (m.rows, m.columns, m.first_id)
     assert layout.n_dots == len(mem) and layout.last_id == mem["id"].max()
-    for r, c in ((1, 1), (1, m["columns"]), (m["rows"], 1), (7, 13)):
+    for r, c in ((1, 1), (1, m.columns), (m.rows, 1), (7, 13)):
         row = mem[(mem["row"] == r) & (mem["col"] == c)].iloc[0]
         assert layout.ids[r - 1, c - 1] == row["id"]
         assert layout.grid_index(np.array([row["id"]]))[0] == (r - 1) * layout.columns + c - 1
@@ -65,9 +64,9 @@ def test_layout_is_the_kits(design, layout, kit_dir):
         assert layout.col_theta_rad[c - 1] == pytest.approx(row["theta_rad"])
     others = table.loc[table["surface"] != "membrane", "id"].to_numpy()
     assert not layout.is_membrane(others).any()
-    spec = design["specimen"]
-    assert layout.radius_mm == pytest.approx(spec["diameter"] / 2 + spec["membrane_thickness"])
-    assert layout.height_mm == spec["height"]
+    spec = design.specimen
+    assert layout.radius_mm == pytest.approx(spec.diameter / 2 + spec.membrane_thickness)
+    assert layout.height_mm == spec.height
     # what the workflow reads: the test's kit export
     exported = membrane_layout(load_kit_design(kit_dir))
     assert np.array_equal(exported.ids, layout.ids) and np.allclose(exported.row_z_mm, layout.row_z_mm)
@@ -149,10 +148,10 @@ def test_no_kit_counts_in_figure_code(design):
     """The counts and sizes of the default kit (membrane rows, columns, first and last ID, number
     of dots, specimen size) appear nowhere in the figure and report code as number literals:
     they are read from the kit."""
-    m, spec = design["membrane"], design["specimen"]
-    counts = {m["rows"], m["columns"], m["first_id"], m["rows"] * m["columns"],
-              m["first_id"] + m["rows"] * m["columns"] - 1, spec["diameter"], spec["height"],
-              spec["diameter"] / 2, round(spec["diameter"] / 2, 1)}  # fmt: skip
+    m, spec = design.membrane, design.specimen
+    counts = {m.rows, m.columns, m.first_id, m.rows * m.columns,
+              m.first_id + m.rows * m.columns - 1, spec.diameter, spec.height,
+              spec.diameter / 2, round(spec.diameter / 2, 1)}  # fmt: skip
     assert len(FIGURE_CODE) >= 7
     found = [
         f"{path.relative_to(SRC)}:{line}: {text}"

@@ -134,8 +134,8 @@ def test_small_membrane_dot_is_at_least_6_px_at_1080p(design):
 
     cam = make_cameras(SimulationConfig(width=1920, height=1080))[0]
     theta = np.arctan2(cam.center[1], cam.center[0])
-    r = design["specimen"]["diameter"] / 2 + design["specimen"]["membrane_thickness"]
-    ring = _disc(design["membrane"]["small_dot_diameter"] / 2)
+    r = design.specimen.diameter / 2 + design.specimen.membrane_thickness
+    ring = _disc(design.membrane.small_dot_diameter / 2)
     pts = np.c_[r * np.cos(theta + ring[:, 0] / r), r * np.sin(theta + ring[:, 0] / r), 71.1 + ring[:, 1]]
     uv, _, _ = project_water(cam, pts, cell_optics(design))
     width, height = np.ptp(uv, axis=0)
@@ -151,7 +151,7 @@ def test_cell_wall_dots_land_where_opencv_projects_them(noiseless_frame):
     cam = scene.cameras["cam01"]
     t = scene.table
     dots = t[(t.surface == "cell_outer") & (t.kind == "dot")]
-    r = scene.design["cell"]["outer_radius"]
+    r = scene.design.cell.outer_radius
     xyz = np.c_[r * np.cos(dots.theta_rad), r * np.sin(dots.theta_rad), dots.z_mm]
     facing = (xyz[:, :2] * (cam.center[:2] - xyz[:, :2])).sum(axis=1) > 0.8 * r * np.linalg.norm(
         cam.center[:2] - xyz[:, :2], axis=1

@@ -121,7 +121,7 @@ def first_frame(design, table, kit_dir, tmp_path_factory) -> dict:
 def test_reconstruct_cell_writes_every_camera_and_the_fitted_cell(first_frame):
     cell = read_json(first_frame["cell"], "cell.json")
     assert sorted(cell["cameras"]) == [f"cam{i:02d}" for i in range(1, 14)] and cell["cameras_dropped"] == {}
-    kit_radius = first_frame["design"]["cell"]["outer_radius"]
+    kit_radius = first_frame["design"].cell.outer_radius
     assert cell["cell"]["source"] and abs(cell["cell"]["outer_radius_mm"] - kit_radius) < 0.1
     points = read_table(first_frame["cell_points"], POINTS)
     assert set(points["frame"]) == {0} and len(points) > 100
@@ -136,7 +136,7 @@ def test_trace_specimen_records_the_cell_of_cell_json_in_quality_json(first_fram
     for key in ("axis_tilt_deg", "cylinder_rms_mm", "source"):
         assert quality["cell"][key] == cell_doc["cell"][key], key
     assert quality["cell"]["wavelength_nm"] == WAVELENGTH_NM
-    assert quality["cell"]["temperature_c"] == first_frame["design"]["cell"].get("temperature_c")
+    assert quality["cell"]["temperature_c"] == first_frame["design"].cell.temperature_c
     assert quality["cell"]["outer_radius_mm"] == cell_doc["cell"]["outer_radius_mm"]  # not refined
     assert quality["cameras_posed"] == cell_doc["cameras_posed"] and quality["cameras_dropped"] == {}
     assert list(quality)[-2:] == ["cameras_posed", "cameras_dropped"]

@@ -4,6 +4,7 @@ viewer (issue 18), against the simulator's truth."""
 from __future__ import annotations
 
 import re
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -11,6 +12,7 @@ import pytest
 from test_volume import frame_points  # the deforming specimen's points, as the volume tests build them
 
 from triaxtrack.deformation import Deformation
+from triaxtrack.kit import load_design
 from triaxtrack.simulate import SimulationConfig, loading_progress
 from triaxtrack.simulate.loadlog import LOG_COLUMNS, LoadFrameSimulation, deviator_stress, simulate_load_frame
 from triaxtrack.stress import (
@@ -25,7 +27,9 @@ from triaxtrack.stress import (
 HISTORY = [[0, 0], [0.3, 0.4], [0.4, 0.4], [0.5, 0.395], [0.6, 0.4], [1, 1]]
 OFFSET_S = 1.3
 DEFORMATION = Deformation(axial_strain=0.05, bulge_mm=2.0, axial_nonuniformity=0.3)
-DESIGN = {"specimen": {"diameter": 71.1, "height": 142.2, "membrane_thickness": 0.3}}
+DESIGN = load_design(
+    Path(__file__).resolve().parents[1] / "config" / "kit.yaml"
+)  # its specimen: 71.1 x 142.2 mm
 HEIGHT_NOISE_MM = 0.003  # the measured top cap's scatter (the volume stage's, order of magnitude)
 OFFSET_TOL_FRAMES = 0.05  # on exact truth with that scatter the offset is a small part of a frame
 Q_REL_TOL = 0.005  # q on the mean area where q > 10 % of the peak (the issue's must-show)

@@ -329,7 +329,7 @@ def test_local_strains_of_a_uniform_stretch(design, table):
 
     ref = frame_points(design, table, CASES["undeformed"], 0.0)
     ids = table.loc[table["surface"] == "membrane", "id"].to_numpy()
-    h0 = float(design["specimen"]["height"])
+    h0 = float(design.specimen.height)
     ea, er = 2e-3, -7e-4  # compression positive: shortening 0.2 %, radius growing 0.07 %
     moved = ref.assign(x_mm=ref["x_mm"] * (1 - er) + 0.3, y_mm=ref["y_mm"] * (1 - er) - 0.2,
                        z_mm=5.0 + ref["z_mm"] * (1 - ea))  # fmt: skip

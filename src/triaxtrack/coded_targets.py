@@ -23,6 +23,7 @@ import pandas as pd
 
 from triaxtrack.codes import rotations
 from triaxtrack.detect import DetectParams, ellipse_maps
+from triaxtrack.kit_design import CodedTargetDesign
 
 # sampling of a CT, in units of the printed design (mm), relative to its centre
 CT_INNER_WHITE = 0.5  # fraction of the way from the centre dot's edge to the ring: the white gap
@@ -79,10 +80,10 @@ class _CtGeometry:
     extent: float
 
 
-def _ct_geometry(ct: dict) -> _CtGeometry:
+def _ct_geometry(ct: CodedTargetDesign) -> _CtGeometry:
     """Sampling radii of a CT in units of its centre-dot radius."""
-    rc, r0, r1 = ct["centre_radius"], ct["ring_inner_radius"], ct["ring_outer_radius"]
-    label = ct.get("label_radius", r1 + 1.2)
+    rc, r0, r1 = ct.centre_radius, ct.ring_inner_radius, ct.ring_outer_radius
+    label = ct.label_radius
     return _CtGeometry(
         inner=(rc + CT_INNER_WHITE * (r0 - rc)) / rc,
         ring=tuple((r0 + f * (r1 - r0)) / rc for f in CT_RING_RADII),
@@ -234,7 +235,11 @@ def _drop_code_pieces(
 
 
 def decode_coded_targets(
-    gray: np.ndarray, blobs: pd.DataFrame, codes: dict[int, int], ct: dict, params: DetectParams | None = None
+    gray: np.ndarray,
+    blobs: pd.DataFrame,
+    codes: dict[int, int],
+    ct: CodedTargetDesign,
+    params: DetectParams | None = None,
 ) -> pd.DataFrame:
     """Read the ring code around every candidate centre dot; keep the confident, unique ones.
 
@@ -253,7 +258,7 @@ def decode_coded_targets(
     CT).
     """
     p = params or DetectParams()
-    n = int(ct["sectors"])
+    n = int(ct.sectors)
     geo = _ct_geometry(ct)
     cand = _ct_candidates(blobs, p)
     cols = ["id", "blob", "u_px", "v_px", "confidence", "distance", "white", "black", "extent_px", "sectors"]

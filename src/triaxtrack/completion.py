@@ -35,6 +35,7 @@ import numba
 import numpy as np
 
 from triaxtrack.kit import membrane_radius
+from triaxtrack.kit_design import KitDesign
 from triaxtrack.nearest import nearest_within
 from triaxtrack.neighbour_motion import solve3
 from triaxtrack.window import WindowMeasure
@@ -62,12 +63,12 @@ class DotGrid(NamedTuple):
     aspect: float
 
 
-def dot_grid(design: dict) -> DotGrid:
+def dot_grid(design: KitDesign) -> DotGrid:
     """The :class:`DotGrid` of a kit design (``membrane`` and ``specimen`` sections)."""
-    m = design["membrane"]
-    rows, columns = int(m["rows"]), int(m["columns"])
-    ids = int(m["first_id"]) + np.arange(rows * columns, dtype=np.int64).reshape(rows, columns)
-    aspect = (2 * np.pi * membrane_radius(design) / columns) / (design["specimen"]["height"] / rows)
+    m = design.membrane
+    rows, columns = int(m.rows), int(m.columns)
+    ids = int(m.first_id) + np.arange(rows * columns, dtype=np.int64).reshape(rows, columns)
+    aspect = (2 * np.pi * membrane_radius(design) / columns) / (design.specimen.height / rows)
     return DotGrid(ids, float(aspect))
 
 

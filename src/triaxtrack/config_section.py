@@ -4,7 +4,9 @@ Every section of ``config.yaml`` is read by the package through a frozen datacla
 (``calibration``, ``reconstruction``, ``cell``, ``tracking``, ``volume``, ``stress``, ``report``,
 ``score``, ``simulation`` and its ``load_frame``), built by that dataclass's ``from_dict``, and
 each ``from_dict`` calls :func:`section_from_dict` (or :func:`section_dict`, when it converts
-values first):
+values first). The kit design (``kit.yaml``, :mod:`triaxtrack.kit_design`) is read by the same
+rule, section by section (its keys have no defaults but a few optional ones: a key it needs and
+the file leaves out is an error too):
 
 * **An unknown key is an error**: ValueError naming the section, the key, the key meant for a
   near miss and the known keys (``tracking: unknown key 'gates' (did you mean 'gate'?); known

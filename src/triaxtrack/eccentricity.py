@@ -32,6 +32,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
+from triaxtrack.kit_design import KitDesign
 from triaxtrack.optics import Camera, CellOptics, project_air, project_water
 
 OUTLINE_POINTS = 8  # points of the projected outline (the centroid's error: 6e-4 of it at 6 or more)
@@ -106,11 +107,11 @@ def observation_eccentricity(
     return np.where(np.isfinite(ecc), ecc, 0.0)
 
 
-def mark_radii(design: dict, table: pd.DataFrame) -> pd.Series:
+def mark_radii(design: KitDesign, table: pd.DataFrame) -> pd.Series:
     """Printed radius (mm) of the round mark whose centroid is measured, by target ID: a dot's
     own radius, a coded target's centre dot (the kit's ``coded_target.centre_radius``).
     ``design``: the kit (:func:`triaxtrack.kit.load_kit_design`); ``table``: its
     :func:`triaxtrack.kit.target_table`."""
-    centre = float(design["coded_target"]["centre_radius"])
+    centre = float(design.coded_target.centre_radius)
     radius = np.where(table["kind"] == "coded", centre, table["diameter_mm"].to_numpy(float) / 2)
     return pd.Series(radius, index=table["id"].to_numpy(), name="mark_radius_mm")

@@ -22,6 +22,7 @@ from xml.sax.saxutils import quoteattr
 import numpy as np
 import pandas as pd
 
+from triaxtrack.kit_design import KitDesign
 from triaxtrack.volume.config import VolumeConfig
 from triaxtrack.volume.grid import MAX_MISSING_SHARE, MembraneGrid
 from triaxtrack.volume.series import FAILURES, frame_grid
@@ -73,7 +74,7 @@ def node_strains(grid: MembraneGrid, grid0: MembraneGrid) -> dict[str, np.ndarra
 def membrane_frames(
     points: pd.DataFrame,
     table: pd.DataFrame,
-    design: dict,
+    design: KitDesign,
     frames: list[int],
     reference_frame: int,
     t0: float | None = None,
@@ -82,7 +83,7 @@ def membrane_frames(
     """The membrane surface of each of ``frames`` (a :class:`MembraneFrame`), or ``(frame,
     reason)`` for a frame that fails; displacements and strains from ``reference_frame``."""
     if t0 is None:
-        t0 = float(design["specimen"]["membrane_thickness"])
+        t0 = float(design.specimen.membrane_thickness)
     try:
         grid0 = frame_grid(points[points["frame"] == reference_frame], table, design, t0, max_missing_share)[
             0

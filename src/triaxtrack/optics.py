@@ -22,6 +22,7 @@ import cv2
 import numpy as np
 
 from triaxtrack.config_section import section_from_dict
+from triaxtrack.kit_design import KitDesign
 from triaxtrack.testfolder import read_cameras_doc, write_cameras_doc
 
 NEWTON_MAX_ITER = 30
@@ -125,7 +126,7 @@ class CellConfig:
 
 
 def cell_optics(
-    design: dict,
+    design: KitDesign,
     outer_radius: float | None = None,
     wall_thickness_mm: float | None = None,
     n_acrylic: float | None = None,
@@ -134,20 +135,20 @@ def cell_optics(
     """The cell of a kit design (``kit.json``: ``cell`` radii, height and acrylic index, ``water``
     index), each value replaced by the argument given for it (``None``: the design's). The inner
     radius is ``outer_radius - wall_thickness_mm``."""
-    c = design["cell"]
-    outer = c["outer_radius"] if outer_radius is None else outer_radius
-    wall = c["outer_radius"] - c["inner_radius"] if wall_thickness_mm is None else wall_thickness_mm
+    c = design.cell
+    outer = c.outer_radius if outer_radius is None else outer_radius
+    wall = c.outer_radius - c.inner_radius if wall_thickness_mm is None else wall_thickness_mm
     return CellOptics(
         outer_radius=float(outer),
         inner_radius=float(outer - wall),
-        n_acrylic=float(c["refractive_index"] if n_acrylic is None else n_acrylic),
-        n_water=float(design["water"]["refractive_index"] if n_water is None else n_water),
-        z_min=c["z_min"],
-        z_max=c["z_max"],
+        n_acrylic=float(c.refractive_index if n_acrylic is None else n_acrylic),
+        n_water=float(design.water.refractive_index if n_water is None else n_water),
+        z_min=c.z_min,
+        z_max=c.z_max,
     )
 
 
-def configured_cell(design: dict, cell: CellConfig, outer_radius: float | None = None) -> CellOptics:
+def configured_cell(design: KitDesign, cell: CellConfig, outer_radius: float | None = None) -> CellOptics:
     """:func:`cell_optics` of a kit design with the config's ``cell`` section (``cell``:
     ``wall_thickness_mm``, ``n_acrylic``, ``n_water``, each None for the design's) and, if
     given, a measured ``outer_radius`` (mm)."""

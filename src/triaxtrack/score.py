@@ -15,6 +15,7 @@ import numpy as np
 import pandas as pd
 
 from triaxtrack.calibrate import calibrated_camera
+from triaxtrack.kit_design import KitDesign
 from triaxtrack.optics import Camera, read_cameras
 from triaxtrack.score_cameras import score_calibrations, score_cameras
 from triaxtrack.score_table import AT_LEAST, COLUMNS, ScoreTolerances, _metric
@@ -33,7 +34,7 @@ def read_calibrations(folder: str | Path) -> dict[str, Camera]:
 
 
 def true_projections(
-    cam: Camera, ids: np.ndarray, frame: int, points: pd.DataFrame, table: pd.DataFrame, design: dict
+    cam: Camera, ids: np.ndarray, frame: int, points: pd.DataFrame, table: pd.DataFrame, design: KitDesign
 ) -> np.ndarray:
     """(N, 2) exact distorted pixels of targets ``ids`` at ``frame`` in ``cam``, from the truth's
     3-D points: through the air for cell-wall targets, through both walls for the others."""
@@ -75,7 +76,7 @@ def score_identification(
     points: pd.DataFrame,
     cameras: dict[str, Camera],
     table: pd.DataFrame,
-    design: dict,
+    design: KitDesign,
     tol: ScoreTolerances,
     source: str = "labels.parquet",
 ) -> pd.DataFrame:
@@ -347,7 +348,7 @@ def _score_labels(
     )
 
 
-def _test_kit(truth_dir: Path) -> dict:
+def _test_kit(truth_dir: Path) -> KitDesign:
     """The design of a test's kit/ (beside truth/)."""
     from triaxtrack.kit import load_kit_design
 

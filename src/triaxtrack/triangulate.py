@@ -43,6 +43,7 @@ from triaxtrack.influence import (
     observation_shift,
 )
 from triaxtrack.kit import design_points, load_kit_design, target_table
+from triaxtrack.kit_design import KitDesign
 from triaxtrack.optics import (
     Camera,
     CellConfig,
@@ -528,18 +529,18 @@ def quality_cell(quality: dict) -> CellOptics:
     )
 
 
-def with_cell_record(quality: dict, cell_doc: dict, cell_config: CellConfig, design: dict) -> dict:
+def with_cell_record(quality: dict, cell_doc: dict, cell_config: CellConfig, design: KitDesign) -> dict:
     """The first frame's ``quality`` (:func:`quality_report`) with the record of the cell and
     cameras of ``cell_doc`` (rule reconstruct_cell's ``cell.json``,
     :func:`triaxtrack.sfm.cell_summary`): the cell's axis tilt, cylinder RMS and ``source``, how
     each camera was posed and which were left out; and the wavelength and temperature the
     indices hold for (``cell_config``, the config's ``cell`` section, else the kit's). A new dict,
     the keys in ``quality``'s order and the new ones after them."""
-    fitted, kit_cell = cell_doc["cell"], design["cell"]
+    fitted, kit_cell = cell_doc["cell"], design.cell
     cell = {
         **quality["cell"],
-        "wavelength_nm": cell_config.wavelength_nm or kit_cell.get("wavelength_nm"),
-        "temperature_c": cell_config.temperature_c or kit_cell.get("temperature_c"),
+        "wavelength_nm": cell_config.wavelength_nm or kit_cell.wavelength_nm,
+        "temperature_c": cell_config.temperature_c or kit_cell.temperature_c,
         "axis_tilt_deg": fitted["axis_tilt_deg"],
         "cylinder_rms_mm": fitted["cylinder_rms_mm"],
         "source": fitted["source"],

@@ -11,6 +11,7 @@ import numpy as np
 from triaxtrack.calibrate.corners import SmoothedImage, grid_indices, refine_view, smooth_image
 from triaxtrack.calibrate.grid import _seed_grids, checkered, consistent_corners, grow_grid
 from triaxtrack.kit import board_corners_mm
+from triaxtrack.kit_design import BoardDesign
 
 # findChessboardCornersSB: ACCURACY up-samples (sub-pixel positions on small boards),
 # NORMALIZE_IMAGE equalises exposure, EXHAUSTIVE tries harder on strongly tilted boards
@@ -46,9 +47,9 @@ class BoardImage:
         return None if self.corners_px is None else ("whole" if self.whole else "partial")
 
 
-def board_pattern(board: dict) -> tuple[int, int]:
+def board_pattern(board: BoardDesign) -> tuple[int, int]:
     """(columns, rows) of inner corners: ``(squares_x - 1, squares_y - 1)``."""
-    return int(board["squares_x"]) - 1, int(board["squares_y"]) - 1
+    return int(board.squares_x) - 1, int(board.squares_y) - 1
 
 
 def _sample(gray: np.ndarray, uv: np.ndarray) -> np.ndarray:
@@ -98,7 +99,7 @@ def right_handed(grid_px: np.ndarray) -> np.ndarray:
     return grid_px.copy()
 
 
-def find_whole_board(gray: np.ndarray, board: dict, image: SmoothedImage | None = None) -> BoardImage:
+def find_whole_board(gray: np.ndarray, board: BoardDesign, image: SmoothedImage | None = None) -> BoardImage:
     """The whole board in a uint8 grey image (``findChessboardCornersSB``, the board's own order,
     refined by :func:`refine_view`; ``image``: the :func:`smooth_image` of ``gray`` if at hand):
     a BoardImage named '' with ``whole`` true, or without corners when the board is not found."""
@@ -111,11 +112,13 @@ def find_whole_board(gray: np.ndarray, board: dict, image: SmoothedImage | None 
         return BoardImage("", None)
     corners = canonical_corner_order(gray, corners.reshape(-1, 2), pattern)
     image = smooth_image(gray) if image is None else image
-    uv, obj = refine_view(image, corners, board_corners_mm(board), float(board["square_mm"]))
+    uv, obj = refine_view(image, corners, board_corners_mm(board), float(board.square_mm))
     return BoardImage("", uv, obj, whole=True)
 
 
-def find_partial_board(gray: np.ndarray, board: dict, image: SmoothedImage | None = None) -> BoardImage:
+def find_partial_board(
+    gray: np.ndarray, board: BoardDesign, image: SmoothedImage | None = None
+) -> BoardImage:
     """The part of a board seen in an image it runs off: a BoardImage named '' (``whole`` false),
     without corners if fewer than ``PARTIAL_MIN_CORNERS`` corners in at least
     ``PARTIAL_MIN_LINES`` rows and columns are found.
@@ -152,7 +155,7 @@ def find_partial_board(gray: np.ndarray, board: dict, image: SmoothedImage | Non
     grid = right_handed(best)
     grid[~consistent_corners(grid)] = np.nan
     r, c = np.nonzero(np.isfinite(grid[..., 0]))
-    square = float(board["square_mm"])
+    square = float(board.square_mm)
     uv, obj = refine_view(image, grid[r, c], np.c_[c * square, r * square, np.zeros(len(r))], square)
     return _enough(BoardImage("", uv, obj, whole=False), square)
 
@@ -170,18 +173,18 @@ def _enough(view: BoardImage, square_mm: float) -> BoardImage:
     return view
 
 
-def find_board(gray: np.ndarray, board: dict, name: str = "") -> BoardImage:
+def find_board(gray: np.ndarray, board: BoardDesign, name: str = "") -> BoardImage:
     """The board in a uint8 grey image: whole (:func:`find_whole_board`), else the part of it
     that is seen (:func:`find_partial_board`), else a BoardImage without corners; named
     ``name``."""
     image = smooth_image(gray)
-    view = _enough(find_whole_board(gray, board, image), float(board["square_mm"]))
+    view = _enough(find_whole_board(gray, board, image), float(board.square_mm))
     if view.corners_px is None:
         view = find_partial_board(gray, board, image)
     return replace(view, image=name)
 
 
-def find_board_corners(gray: np.ndarray, board: dict) -> np.ndarray | None:
+def find_board_corners(gray: np.ndarray, board: BoardDesign) -> np.ndarray | None:
     """(N, 2) float64 inner corners of the whole board in a uint8 grey image, in the order of
     :func:`triaxtrack.kit.board_corners_mm`, refined; None unless every corner is found."""
     view = find_whole_board(gray, board)

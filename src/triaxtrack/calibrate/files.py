@@ -11,26 +11,28 @@ import cv2
 import numpy as np
 
 from triaxtrack.calibrate.config import CalibrationError
+from triaxtrack.kit_design import BoardDesign, board_design
 from triaxtrack.optics import Camera
 
 IMAGE_SUFFIXES = (".png",)  # board images of test-folder.md: calibration/<camera>/*.png
 
 
-def read_board(kit_dir: str | Path) -> dict:
-    """The checkerboard of a kit export (``KIT/board.json``); ValueError naming the file."""
+def read_board(kit_dir: str | Path) -> BoardDesign:
+    """The checkerboard of a kit export (``KIT/board.json``, less the export's ``inner_corners``
+    and ``units``: the kit design's ``board`` section); ValueError naming the file."""
     path = Path(kit_dir) / "board.json"
     try:
-        board = json.loads(path.read_text())
-        if board.get("type", "checkerboard") != "checkerboard":
-            raise ValueError(f"board type {board['type']!r} is not a checkerboard")
+        doc = json.loads(path.read_text())
+        if doc.get("type", "checkerboard") != "checkerboard":
+            raise ValueError(f"board type {doc['type']!r} is not a checkerboard")
         for key in ("squares_x", "squares_y", "square_mm"):
-            if key not in board:
+            if key not in doc:
                 raise ValueError(f"no {key!r}")
-        if min(int(board["squares_x"]), int(board["squares_y"])) < 3 or float(board["square_mm"]) <= 0:
+        if min(int(doc["squares_x"]), int(doc["squares_y"])) < 3 or float(doc["square_mm"]) <= 0:
             raise ValueError("needs at least 3 x 3 squares of positive size")
+        return board_design({k: v for k, v in doc.items() if k not in ("inner_corners", "units")})
     except (OSError, ValueError, TypeError) as err:
         raise ValueError(f"{path}: not a usable calibration board: {err}") from err
-    return board
 
 
 def list_board_images(camera: str, folder: str | Path) -> list[Path]:

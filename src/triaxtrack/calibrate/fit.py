@@ -12,6 +12,7 @@ import numpy as np
 from triaxtrack.calibrate.board import BoardImage
 from triaxtrack.calibrate.config import MODELS, CalibrationConfig, CalibrationError
 from triaxtrack.kit import board_corners_mm
+from triaxtrack.kit_design import BoardDesign
 
 CALIBRATE_CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 200, 1e-12)
 MIN_WHOLE_BOARDS = 3  # the first fit uses the whole boards alone when there are at least this many
@@ -19,13 +20,13 @@ MAD_TO_SIGMA = 1.4826  # MAD of a normal distribution times this is its standard
 MAX_ROUNDS = 10  # outlier rejection rounds (each drops at least one image)
 
 
-def _object_points(view: BoardImage, board: dict) -> np.ndarray:
+def _object_points(view: BoardImage, board: BoardDesign) -> np.ndarray:
     return board_corners_mm(board) if view.object_mm is None else view.object_mm
 
 
 def _fit(
     views: Sequence[BoardImage],
-    board: dict,
+    board: BoardDesign,
     size: tuple[int, int],
     model: str,
     guess: tuple[np.ndarray, np.ndarray] | None = None,
@@ -46,7 +47,7 @@ def _fit(
 
 
 def fit_views(
-    views: Sequence[BoardImage], board: dict, size: tuple[int, int], model: str
+    views: Sequence[BoardImage], board: BoardDesign, size: tuple[int, int], model: str
 ) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
     """Two-stage calibration: ``(rms_px, K, dist, per-view rms_px)``, dist with the model's
     coefficients only. With at least ``MIN_WHOLE_BOARDS`` whole boards and some partial ones,
@@ -108,7 +109,7 @@ def _fit_without_outliers(
     found: Sequence[BoardImage],
     reason: dict[str, str],
     size: tuple[int, int],
-    board: dict,
+    board: BoardDesign,
     cfg: CalibrationConfig,
     where: str,
 ) -> tuple[list[BoardImage], tuple[float, np.ndarray, np.ndarray, np.ndarray], float, dict[str, str]]:
@@ -148,7 +149,7 @@ def _image_records(
     found: Sequence[BoardImage],
     used_rms: dict[str, float],
     reason: dict[str, str],
-    board: dict,
+    board: BoardDesign,
     K: np.ndarray,
     dist: np.ndarray,
 ) -> list[dict]:
@@ -178,7 +179,7 @@ def calibrate_views(
     camera: str,
     found: Sequence[BoardImage],
     size: tuple[int, int],
-    board: dict,
+    board: BoardDesign,
     cfg: CalibrationConfig,
     folder: str | Path = "",
 ) -> dict:
@@ -212,5 +213,5 @@ def calibrate_views(
         "n_corners_used": int(sum(len(b.found_corners()) for b in used)),
         "outlier_limit_px": float(limit),
         "images": _image_records(found, used_rms, reason, board, K, dist),
-        "board": {k: board[k] for k in ("squares_x", "squares_y", "square_mm")},
+        "board": {"squares_x": board.squares_x, "squares_y": board.squares_y, "square_mm": board.square_mm},
     }

@@ -14,11 +14,12 @@ from triaxtrack.calibrate.config import CalibrationConfig, CalibrationError
 from triaxtrack.calibrate.corners import refine_view
 from triaxtrack.calibrate.files import _read_gray, format_calibration, list_board_images, read_board
 from triaxtrack.calibrate.fit import _object_points, calibrate_views
+from triaxtrack.kit_design import BoardDesign
 from triaxtrack.testfolder import write_calibration
 
 
 def detect_boards(
-    camera: str, image_paths: Sequence[str | Path], board: dict
+    camera: str, image_paths: Sequence[str | Path], board: BoardDesign
 ) -> tuple[tuple[int, int], list[BoardImage]]:
     """Read each image (grey) and find the board, whole or partial (:func:`find_board`):
     ``((width, height), [BoardImage, ...])`` in the order of ``image_paths``.
@@ -47,7 +48,7 @@ def refine_boards(
     camera: str,
     image_paths: Sequence[str | Path],
     found: Sequence[BoardImage],
-    board: dict,
+    board: BoardDesign,
     K: np.ndarray,
     dist: np.ndarray,
 ) -> list[BoardImage]:
@@ -56,7 +57,7 @@ def refine_boards(
     a new list, in the same order; a view left with too few corners loses its board."""
     by_name = {Path(p).name: p for p in image_paths}
     out = []
-    square = float(board["square_mm"])
+    square = float(board.square_mm)
     for view in found:
         if view.corners_px is None:
             out.append(view)

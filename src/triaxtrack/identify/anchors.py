@@ -15,6 +15,7 @@ import numpy as np
 
 from triaxtrack.identify.grid import ellipse_radius
 from triaxtrack.identify.state import IdentifyParams
+from triaxtrack.kit_design import KitDesign
 
 
 @dataclass(frozen=True)
@@ -33,13 +34,13 @@ class _Anchor:
         return ct
 
 
-def _pedestal_anchors(centres: dict, design: dict) -> list[_Anchor]:
+def _pedestal_anchors(centres: dict, design: KitDesign) -> list[_Anchor]:
     """Pairs first (the paper's method), then single CTs whose partner was not decoded."""
-    ped = {s["surface"]: s for s in design["pedestal_targets"]["stripes"]}
+    ped = {s.surface: s for s in design.pedestal_targets.stripes}
     top, bottom = ped["pedestal_top"], ped["pedestal_bottom"]
     anchors = []
-    for k in range(top["count"]):
-        a, b = centres.get(top["first_id"] + k), centres.get(bottom["first_id"] + k)
+    for k in range(top.count):
+        a, b = centres.get(top.first_id + k), centres.get(bottom.first_id + k)
         if a is not None or b is not None:
             anchors.append(_Anchor(k + 1, a, b))
     return sorted(anchors, key=lambda x: x.top is None or x.bottom is None)
@@ -89,15 +90,15 @@ class _MembraneView:
     column_mm: float  # membrane column pitch on its outer surface
 
     @staticmethod
-    def of(regions, anchors, axis, pos, design) -> _MembraneView:
+    def of(regions, anchors, axis, pos, design: KitDesign) -> _MembraneView:
         nodes = [k for g in regions for k in g.values()]
         q = [_width_ratio(e[1], axis) for a in anchors for e in (a.top, a.bottom) if e is not None]
-        r_m = design["specimen"]["diameter"] / 2 + design["specimen"]["membrane_thickness"]
+        r_m = design.specimen.diameter / 2 + design.specimen.membrane_thickness
         return _MembraneView(
             axis_point=np.median(pos[nodes], axis=0) if nodes else np.zeros(2),
             q_max=max(q) if q else 1.0,
-            proud_mm=design["pedestal"]["radius"] - r_m,
-            column_mm=2 * np.pi * r_m / design["membrane"]["columns"],
+            proud_mm=design.pedestal.radius - r_m,
+            column_mm=2 * np.pi * r_m / design.membrane.columns,
         )
 
 
@@ -187,7 +188,7 @@ def _anchor_row(
     i_col: np.ndarray,
     xy_col: np.ndarray,
     pi: int,
-    design: dict,
+    design: KitDesign,
     p: IdentifyParams,
 ) -> int | None:
     """The region's row offset from the anchor, read on one grid column (row indices ``i_col``,
@@ -196,10 +197,10 @@ def _anchor_row(
     (rigid); the pitch is measured on the column itself, as the membrane may be strained
     unevenly. The offset is the one of the larger dots' row phase ``pi`` nearest the readings;
     None when no CT reads it or a reading is more than ``p.row_tolerance`` rows from it."""
-    m = design["membrane"]
-    rc = design["coded_target"]["centre_radius"]
-    z_from_face = design["pedestal_targets"]["stripes"][0]["z_from_face"]
-    step, first = m["large_step"], m["large_first"]
+    m = design.membrane
+    rc = design.coded_target.centre_radius
+    z_from_face = design.pedestal_targets.stripes[0].z_from_face
+    step, first = m.large_step, m.large_first
     estimates = []
     for end, sign in ((an.top, 1.0), (an.bottom, -1.0)):
         if end is None:
@@ -212,13 +213,13 @@ def _anchor_row(
         if len(order) < 3 or np.any(di != 1):
             continue  # the column's end rows are not all there
         pitch = float(np.median(np.abs(np.diff(d_mm[order]))))
-        row_mm = design["specimen"]["height"] / m["rows"]
+        row_mm = design.specimen.height / m.rows
         if not ROW_PITCH_RANGE[0] <= pitch / row_mm <= ROW_PITCH_RANGE[1]:
             continue  # not the membrane's rows (a lattice of the larger dots alone, say)
         rows_from_face = (d_mm[order[0]] - z_from_face) / pitch
         if rows_from_face * MAX_PITCH_CHANGE > p.row_tolerance:
             continue  # the column's nearest dots are too far from the face to count rows
-        r_first = 0.5 + rows_from_face if sign > 0 else m["rows"] + 0.5 - rows_from_face
+        r_first = 0.5 + rows_from_face if sign > 0 else m.rows + 0.5 - rows_from_face
         estimates.append(float(r_first - i_col[order[0]]))
     if not estimates:
         return None
@@ -236,7 +237,7 @@ def _anchor_offsets(
     xy: np.ndarray,
     phase: tuple[int, int],
     pos: np.ndarray,
-    design: dict,
+    design: KitDesign,
     p: IdentifyParams,
     ctx: _MembraneView,
 ) -> tuple[int, int] | None:
@@ -244,8 +245,8 @@ def _anchor_offsets(
     the column of C's larger dots, c = (C - 1) * 4 + 1, is the region's column under the anchor
     (:func:`_anchor_column`), and the row comes from the CTs' distance to the end rows
     (:func:`_anchor_row`)."""
-    m = design["membrane"]
-    step, first = m["large_step"], m["large_first"]
+    m = design.membrane
+    step, first = m.large_step, m.large_first
     pi, pj = phase
     down = _anchor_down(an, grid, nodes, xy, pos)
     if down is None:
@@ -258,10 +259,10 @@ def _anchor_offsets(
     r_off = _anchor_row(an, down, nodes[sel, 0], xy[sel], pi, design, p)
     if r_off is None:
         return None
-    return c_off % m["columns"], r_off
+    return c_off % m.columns, r_off
 
 
-def _membrane_region_offsets(grid, phase, anchors, pos, design, p, ctx):
+def _membrane_region_offsets(grid, phase, anchors, pos, design: KitDesign, p, ctx):
     """(column offset, row offset) of one grown grid region from the pedestal CTs, or the reason
     it cannot be fixed."""
     if len(grid) < p.min_region_dots:

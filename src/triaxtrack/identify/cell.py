@@ -25,24 +25,25 @@ from triaxtrack.identify.coded import _theta_dir
 from triaxtrack.identify.grid import WHITE_TOLERANCE, _Pool, grow_chain, local_affine
 from triaxtrack.identify.state import UNLABELLED, IdentifyParams, _assign, _Frame
 from triaxtrack.kit import eq1_dot_id
+from triaxtrack.kit_design import KitDesign
 
 
-def _label_cell_stripes(f: _Frame, pool: _Pool, centres: dict, design: dict, p: IdentifyParams) -> None:
-    cell = design["cell_targets"]
-    per, offset = cell["dots_per_ct"], cell["dot_offset"]
-    rc = design["coded_target"]["centre_radius"]
-    r_out = design["cell"]["outer_radius"]
-    ct_stripes = {s["name"]: s for s in cell["ct_stripes"]}
+def _label_cell_stripes(f: _Frame, pool: _Pool, centres: dict, design: KitDesign, p: IdentifyParams) -> None:
+    cell = design.cell_targets
+    per, offset = cell.dots_per_ct, cell.dot_offset
+    rc = design.coded_target.centre_radius
+    r_out = design.cell.outer_radius
+    ct_stripes = {s.name: s for s in cell.ct_stripes}
     area = f.blobs.area_px.to_numpy()
-    for ds in cell["dot_stripes"]:
-        cs = ct_stripes[ds["ct_stripe"]]
-        n = ds["count"]
+    for ds in cell.dot_stripes:
+        cs = ct_stripes[ds.ct_stripe]
+        n = ds.count
         spacing_mm = 2 * np.pi * r_out / n
         anchors, hints = {}, {}
-        for c in range(cs["first_id"], cs["first_id"] + cs["count"]):
+        for c in range(cs.first_id, cs.first_id + cs.count):
             if c not in centres:
                 continue
-            d = _theta_dir(c, cs["first_id"], cs["count"], centres)
+            d = _theta_dir(c, cs.first_id, cs.count, centres)
             if d is None:
                 continue
             centre, m = centres[c]
@@ -56,14 +57,14 @@ def _label_cell_stripes(f: _Frame, pool: _Pool, centres: dict, design: dict, p: 
             near = [j for j in pool.tree.query_ball_point(pool.pos[k], 1.3 * np.linalg.norm(step)) if j != k]
             if near and area[k] < p.large_area_ratio * area[near].max():
                 continue
-            i = per * (c - cs["first_id"])
+            i = per * (c - cs.first_id)
             anchors[i] = k
             hints[i] = step  # to i + 1, and (evenly spaced) into i from i - 1
             hints.setdefault((i - 1) % n, step)
             pool.free[k] = False
         labels = grow_chain(pool, anchors, n, cyclic=True, gate=p.gate, step_hint=hints)
         for i, k in labels.items():
-            _assign(f, k, ds["first_id"] + i, ds["name"], 1.0 if i in anchors else 0.9)
+            _assign(f, k, ds.first_id + i, ds.name, 1.0 if i in anchors else 0.9)
 
 
 # The scale (pixels per mm down the cell) borrowed from a neighbouring CT, one or two places round
@@ -74,21 +75,21 @@ def _label_cell_stripes(f: _Frame, pool: _Pool, centres: dict, design: dict, p: 
 NEIGHBOUR_SCALE_ERR = 0.1
 
 
-def _label_longitudinal(f: _Frame, pool: _Pool, centres: dict, design: dict, p: IdentifyParams) -> None:
-    cell = design["cell_targets"]
-    offset = cell["dot_offset"]
-    zt, zb = cell["longitudinal_z_top"], cell["longitudinal_z_bottom"]
+def _label_longitudinal(f: _Frame, pool: _Pool, centres: dict, design: KitDesign, p: IdentifyParams) -> None:
+    cell = design.cell_targets
+    offset = cell.dot_offset
+    zt, zb = cell.longitudinal_z_top, cell.longitudinal_z_bottom
     labelled = {int(t): k for k, t in enumerate(f.ids) if t != UNLABELLED}
-    top, bottom = cell["ct_stripes"][0], cell["ct_stripes"][-1]
-    for ls in cell["longitudinal_stripes"]:
-        n = ls["count"]
+    top, bottom = cell.ct_stripes[0], cell.ct_stripes[-1]
+    for ls in cell.longitudinal_stripes:
+        n = ls.count
         spacing_mm = (zt - zb) / (n - 1)
         anchors, hints = {}, {}
-        ct_top = ls["ct"]
-        ct_bottom = ct_top - top["first_id"] + bottom["first_id"]
+        ct_top = ls.ct
+        ct_bottom = ct_top - top.first_id + bottom.first_id
         for ct_id, ct_z, index, z in (
-            (ct_top, top["z"], 0, zt),
-            (ct_bottom, bottom["z"], n - 1, zb),
+            (ct_top, top.z, 0, zt),
+            (ct_bottom, bottom.z, n - 1, zb),
         ):
             dot = labelled.get(eq1_dot_id(ct_id, design))
             if dot is None:
@@ -111,34 +112,36 @@ def _label_longitudinal(f: _Frame, pool: _Pool, centres: dict, design: dict, p: 
             pool.free[k] = False
         labels = grow_chain(pool, anchors, n, cyclic=False, gate=p.gate, step_hint=hints, max_bracket=2)
         for i, k in labels.items():
-            _assign(f, k, ls["first_id"] + i, ls["name"], 1.0 if i in anchors else 0.9)
+            _assign(f, k, ls.first_id + i, ls.name, 1.0 if i in anchors else 0.9)
 
 
-def _neighbour_down(f: _Frame, ct_id: int, centres: dict, labelled: dict, design: dict) -> np.ndarray | None:
+def _neighbour_down(
+    f: _Frame, ct_id: int, centres: dict, labelled: dict, design: KitDesign
+) -> np.ndarray | None:
     """Pixels per mm down the cell at CT ``ct_id`` (not decoded) from the nearest decoded CT of
     its stripe (one or two places along, the nearer first) whose Eq. 1 dot is labelled."""
-    stripe = next(s for s in design["cell_targets"]["ct_stripes"] if 0 <= ct_id - s["first_id"] < s["count"])
+    stripe = next(s for s in design.cell_targets.ct_stripes if 0 <= ct_id - s.first_id < s.count)
     for step in (1, -1, 2, -2):
-        nb = stripe["first_id"] + (ct_id - stripe["first_id"] + step) % stripe["count"]
+        nb = stripe.first_id + (ct_id - stripe.first_id + step) % stripe.count
         dot = labelled.get(eq1_dot_id(nb, design))
         if nb in centres and dot is not None:
-            return (f.pos[dot] - centres[nb][0]) / design["cell_targets"]["dot_offset"]
+            return (f.pos[dot] - centres[nb][0]) / design.cell_targets.dot_offset
     return None
 
 
-def _band_zone(f: _Frame, order: np.ndarray, pad: np.ndarray | float, design: dict) -> np.ndarray:
+def _band_zone(f: _Frame, order: np.ndarray, pad: np.ndarray | float, design: KitDesign) -> np.ndarray:
     """Which blobs lie within half the white band's width, plus ``pad`` (per blob or one,
     pixels), of the line through a longitudinal stripe's dots ``order`` (blob indices, in
     order along it)."""
     line = f.pos[order]
     # pixels per mm across the band at each stripe dot: its minor axis (the band is
     # foreshortened across, towards a silhouette, never along)
-    across = f.blobs.minor_px.to_numpy()[order] / design["cell_targets"]["longitudinal_dot_diameter"]
-    half = design["cell_targets"]["longitudinal_band_width"] / 2
+    across = f.blobs.minor_px.to_numpy()[order] / design.cell_targets.longitudinal_dot_diameter
+    half = design.cell_targets.longitudinal_band_width / 2
     return _near_polyline(f.pos, line, half * np.maximum(across[:-1], across[1:]), pad)
 
 
-def _hide_behind_band(f: _Frame, pool: _Pool, order: np.ndarray, pad: np.ndarray, design: dict) -> None:
+def _hide_behind_band(f: _Frame, pool: _Pool, order: np.ndarray, pad: np.ndarray, design: KitDesign) -> None:
     """Take out of the pool (reason given) the free dots whose image reaches the white band of
     a longitudinal stripe whose dots, in order along it, are ``order`` (blob indices): within
     half the band's width of the line through them plus ``pad`` (per blob, pixels)."""
@@ -172,7 +175,7 @@ def _row_pitch_px(pos: np.ndarray, dots: np.ndarray, axis: np.ndarray) -> np.nda
 
 
 def _straight_chains(
-    pos: np.ndarray, cand: np.ndarray, axis: np.ndarray, pitch: float, design: dict
+    pos: np.ndarray, cand: np.ndarray, axis: np.ndarray, pitch: float, design: KitDesign
 ) -> list[np.ndarray]:
     """Longitudinal stripes among the blobs ``cand`` (indices; ``pos`` undistorted pixels): each
     a straight line of at least ``MIN_CHAIN_DOTS`` of them (RANSAC) along the specimen's axis
@@ -201,13 +204,11 @@ def _straight_chains(
     return out
 
 
-def _stripe_over_row_pitch(design: dict) -> float:
+def _stripe_over_row_pitch(design: KitDesign) -> float:
     """A longitudinal stripe's dot spacing over the membrane's row spacing (design, mm)."""
-    cell, m, spec = design["cell_targets"], design["membrane"], design["specimen"]
-    stripe = (cell["longitudinal_z_top"] - cell["longitudinal_z_bottom"]) / (
-        cell["longitudinal_stripes"][0]["count"] - 1
-    )
-    return stripe / (spec["height"] / m["rows"])
+    cell, m, spec = design.cell_targets, design.membrane, design.specimen
+    stripe = (cell.longitudinal_z_top - cell.longitudinal_z_bottom) / (cell.longitudinal_stripes[0].count - 1)
+    return stripe / (spec.height / m.rows)
 
 
 def _near_polyline(

@@ -11,6 +11,7 @@ from scipy.spatial import cKDTree
 from triaxtrack.detect import ellipse_maps
 from triaxtrack.identify.grid import undistorted_jacobians
 from triaxtrack.identify.state import _Frame
+from triaxtrack.kit_design import CodedTargetDesign, CtStripe, KitDesign, PedestalStripe
 
 
 def _ct_maps(f: _Frame, cts: pd.DataFrame, undistort) -> dict[int, tuple[np.ndarray, np.ndarray]]:
@@ -24,12 +25,12 @@ def _ct_maps(f: _Frame, cts: pd.DataFrame, undistort) -> dict[int, tuple[np.ndar
     return {int(t): (f.pos[b], m) for t, b, m in zip(cts.id, rows, maps_u, strict=True)}
 
 
-def _inside_cts(f: _Frame, cts: pd.DataFrame, ct_design: dict) -> np.ndarray:
+def _inside_cts(f: _Frame, cts: pd.DataFrame, ct_design: CodedTargetDesign) -> np.ndarray:
     """Blobs that belong to a CT (its centre dot, code sectors, or anything on its label)."""
     inside = np.zeros(len(f.blobs), bool)
     if cts.empty:
         return inside
-    extent = ct_design.get("label_radius", ct_design["ring_outer_radius"] + 1.2) / ct_design["centre_radius"]
+    extent = ct_design.label_radius / ct_design.centre_radius
     maps = ellipse_maps(f.blobs.loc[cts.blob.to_numpy()])
     uv = f.blobs[["u_px", "v_px"]].to_numpy()
     tree = cKDTree(uv)
@@ -41,13 +42,16 @@ def _inside_cts(f: _Frame, cts: pd.DataFrame, ct_design: dict) -> np.ndarray:
     return inside
 
 
-def _ct_stripes(design: dict) -> dict[int, tuple[str, int, int]]:
+def _ct_stripes(design: KitDesign) -> dict[int, tuple[str, int, int]]:
     """CT id -> (stripe name, first id, count) for every CT stripe of the design."""
     out = {}
-    stripes = design["pedestal_targets"]["stripes"] + design["cell_targets"]["ct_stripes"]
+    stripes: tuple[PedestalStripe | CtStripe, ...] = (
+        *design.pedestal_targets.stripes,
+        *design.cell_targets.ct_stripes,
+    )
     for st in stripes:
-        for i in range(st["count"]):
-            out[st["first_id"] + i] = (st["name"], st["first_id"], st["count"])
+        for i in range(st.count):
+            out[st.first_id + i] = (st.name, st.first_id, st.count)
     return out
 
 
@@ -59,7 +63,7 @@ RUN_MAX_STEPS = 3
 RUN_RADII_PER_STEP = 3.0
 
 
-def _plausible_cts(cts: pd.DataFrame, design: dict) -> pd.DataFrame:
+def _plausible_cts(cts: pd.DataFrame, design: KitDesign) -> pd.DataFrame:
     """Drop CTs whose place in the image contradicts their ID (a misread, partly hidden target
     decodes to a valid but far-away code). Among a CT's two nearest decoded CTs there must be
     one of its own stripe whose ID is at most two steps away; and a stripe's CTs seen in one

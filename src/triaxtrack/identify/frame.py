@@ -39,6 +39,7 @@ from triaxtrack.identify.membrane import (
 from triaxtrack.identify.merged import _recentred_beside_edge, _split_merged_pairs
 from triaxtrack.identify.state import LABEL_COLUMNS, NOT_REACHED, UNLABELLED, IdentifyParams, _Frame
 from triaxtrack.kit import ct_codes, load_kit_design, target_table
+from triaxtrack.kit_design import KitDesign
 from triaxtrack.tables import FRAME_MAP, LABELS, concat_tables, read_table, write_table
 from triaxtrack.testfolder import read_calibration
 
@@ -78,7 +79,7 @@ def _hide_behind_bands(
     pool: _Pool,
     long_names: set[str],
     blur_px: float,
-    design: dict,
+    design: KitDesign,
     gray: np.ndarray | None,
     detect_params: DetectParams | None,
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -103,7 +104,7 @@ def _hide_behind_bands(
 
 
 def _drop_unidentified_stripes(
-    f: _Frame, pool: _Pool, centres: dict, known: np.ndarray, pad: np.ndarray, design: dict
+    f: _Frame, pool: _Pool, centres: dict, known: np.ndarray, pad: np.ndarray, design: KitDesign
 ) -> None:
     """Take out of the pool the longitudinal stripes whose coded target is out of the picture: a
     straight line of free dots along the axis, on a white band in front of the membrane, never
@@ -121,7 +122,7 @@ def _drop_unidentified_stripes(
 
 
 def _drop_inaccurate(
-    f: _Frame, edge: np.ndarray, recentred: np.ndarray, design: dict, p: IdentifyParams
+    f: _Frame, edge: np.ndarray, recentred: np.ndarray, design: KitDesign, p: IdentifyParams
 ) -> None:
     """Unlabel (with the reason) the labelled dots whose centroid is not accurate: cut by the image
     border; too small or seen too obliquely for their place (see :class:`IdentifyParams`:
@@ -134,7 +135,7 @@ def _drop_inaccurate(
     another dot, by their size and roundness against their grid or stripe neighbours
     (``MERGED_*``); and, of the membrane dots left, those no dot of the rows above or below
     confirms (:func:`~triaxtrack.identify.membrane._without_cross_support`)."""
-    blobs, n, m = f.blobs, len(f.blobs), design["membrane"]
+    blobs, n, m = f.blobs, len(f.blobs), design.membrane
     membrane = _is_membrane(f.ids, m)
     cell_area = np.where(edge, p.min_cell_area_px, p.min_clear_cell_area_px)
     cell_round = np.where(edge, p.min_cell_roundness, p.min_clear_cell_roundness)
@@ -177,14 +178,14 @@ def _merged_pair_rows(
     gray: np.ndarray,
     free: np.ndarray,
     undistort: Callable[[np.ndarray], np.ndarray],
-    design: dict,
+    design: KitDesign,
     p: IdentifyParams,
     detect_params: DetectParams | None,
 ) -> pd.DataFrame:
     """The rows (``LABEL_COLUMNS``) of membrane dots merged in pairs and fitted apart
     (:func:`_split_merged_pairs`) among the ``free`` blobs, with their undistorted pixels; a dot
     beyond the lens model is left out."""
-    split = _split_merged_pairs(f, uv, gray, free, design["membrane"], p, detect_params)
+    split = _split_merged_pairs(f, uv, gray, free, design.membrane, p, detect_params)
     und = undistort(split[["u_px", "v_px"]].to_numpy(np.float64)) if len(split) else np.zeros((0, 2))
     split = split.assign(u_undist_px=und[:, 0], v_undist_px=und[:, 1])
     return split[np.isfinite(und).all(axis=1)]
@@ -220,7 +221,7 @@ def _label_table(
 def identify(
     blobs: pd.DataFrame,
     cts: pd.DataFrame,
-    design: dict,
+    design: KitDesign,
     undistort,
     dots: np.ndarray,
     params: IdentifyParams | None = None,
@@ -253,14 +254,14 @@ def identify(
         quality=np.zeros(n),
         reason=np.full(n, NOT_REACHED, object),
     )
-    in_ct = _inside_cts(f, cts, design["coded_target"])
+    in_ct = _inside_cts(f, cts, design.coded_target)
     cts = _plausible_cts(cts, design)
     candidates = np.asarray(dots, bool) & ~in_ct & invertible
     centres = _ct_maps(f, cts, undistort)
     pool = _Pool(pos, candidates, blobs)
     _label_cell_stripes(f, pool, centres, design, p)
     _label_longitudinal(f, pool, centres, design, p)
-    long_names = {s["name"] for s in design["cell_targets"]["longitudinal_stripes"]}
+    long_names = {s.name for s in design.cell_targets.longitudinal_stripes}
     pad, known = _hide_behind_bands(f, pool, long_names, blur_px, design, gray, detect_params)
     _drop_unidentified_stripes(f, pool, centres, known, pad, design)
     _label_membrane(f, pool, centres, design, p)
@@ -292,7 +293,7 @@ def undistorted_pixels(camera: Camera) -> Callable[[np.ndarray], np.ndarray]:
     return partial(pixels_to_undistorted, camera)
 
 
-def label_frame(gray: np.ndarray, camera, design: dict, codes: dict[int, int], detect_params=None,
+def label_frame(gray: np.ndarray, camera, design: KitDesign, codes: dict[int, int], detect_params=None,
                 identify_params: IdentifyParams | None = None) -> pd.DataFrame:  # fmt: skip
     """Detect and identify every target in one grey frame of a calibrated ``camera``
     (:class:`triaxtrack.optics.Camera`, intrinsics used). Columns ``LABEL_COLUMNS``."""
@@ -300,7 +301,7 @@ def label_frame(gray: np.ndarray, camera, design: dict, codes: dict[int, int], d
     from triaxtrack.detect import detect_blobs, dot_mask
 
     blobs = detect_blobs(gray, detect_params)
-    cts = decode_coded_targets(gray, blobs, codes, design["coded_target"], detect_params)
+    cts = decode_coded_targets(gray, blobs, codes, design.coded_target, detect_params)
     return identify(blobs, cts, design, undistorted_pixels(camera), dot_mask(blobs, detect_params),
                     identify_params, gray=gray, detect_params=detect_params)  # fmt: skip
 
@@ -336,7 +337,7 @@ def draw_labels(gray: np.ndarray, labels: pd.DataFrame, scale: int = 2) -> np.nd
 
 
 def label_chunk_start(
-    video_path, fmap: pd.DataFrame, camera, design: dict, codes: dict[int, int], start: int, stop: int
+    video_path, fmap: pd.DataFrame, camera, design: KitDesign, codes: dict[int, int], start: int, stop: int
 ) -> tuple[int | None, np.ndarray | None, pd.DataFrame]:
     """Label the first frame of the chunk ``[start, stop)`` that the camera recorded.
 

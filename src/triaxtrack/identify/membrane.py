@@ -19,6 +19,7 @@ import pandas as pd
 from triaxtrack.identify.anchors import _axis_down, _membrane_region_offsets, _MembraneView, _pedestal_anchors
 from triaxtrack.identify.grid import NEIGHBOURS, _grow_region, _Pool, ellipse_radius
 from triaxtrack.identify.state import IdentifyParams, _assign, _Frame
+from triaxtrack.kit_design import KitDesign, MembraneDesign
 
 
 def _grid_phase(grid: dict, area: np.ndarray, p: IdentifyParams) -> tuple[int, int] | None:
@@ -45,13 +46,13 @@ def _grid_phase(grid: dict, area: np.ndarray, p: IdentifyParams) -> tuple[int, i
     return int(order[0] // 4), int(order[0] % 4)
 
 
-def _label_membrane(f: _Frame, pool: _Pool, centres: dict, design: dict, p: IdentifyParams) -> None:
-    rc = design["coded_target"]["centre_radius"]
+def _label_membrane(f: _Frame, pool: _Pool, centres: dict, design: KitDesign, p: IdentifyParams) -> None:
+    rc = design.coded_target.centre_radius
     anchors = _pedestal_anchors(centres, design)
     axis = _axis_down(anchors)
     area = f.blobs.area_px.to_numpy()
     regions = []
-    z_from_face = design["pedestal_targets"]["stripes"][0]["z_from_face"]
+    z_from_face = design.pedestal_targets.stripes[0].z_from_face
     for an in anchors:
         if an.top is not None and an.bottom is not None:
             down = an.bottom[0] - an.top[0]
@@ -62,7 +63,7 @@ def _label_membrane(f: _Frame, pool: _Pool, centres: dict, design: dict, p: Iden
             sign = 1.0 if an.top is not None else -1.0
             down = axis
             # a point on the membrane a quarter of its height from the CT's pedestal face
-            depth_mm = design["specimen"]["height"] / 4 + z_from_face
+            depth_mm = design.specimen.height / 4 + z_from_face
             start_at = centre + sign * down * depth_mm * ellipse_radius(mp[None], down[None])[0] / rc
         _, start = pool.tree.query(start_at)
         regions += _grow_region(pool, int(start), down, p.gate)
@@ -108,7 +109,7 @@ def _label_membrane(f: _Frame, pool: _Pool, centres: dict, design: dict, p: Iden
         if ri in reasons:
             f.reason[np.fromiter(grid.values(), int)] = reasons[ri]
             continue
-        ids = _grid_ids(grid, *fixed[ri], design["membrane"])
+        ids = _grid_ids(grid, *fixed[ri], design.membrane)
         for node, k in grid.items():
             if node in ids:
                 _assign(f, k, ids[node], name, 0.9)
@@ -116,7 +117,7 @@ def _label_membrane(f: _Frame, pool: _Pool, centres: dict, design: dict, p: Iden
                 f.reason[k] = "beyond the membrane's rows"
 
 
-def _bridge(grid, phase, other, other_off, pos, axis, design) -> tuple[int, int] | None:
+def _bridge(grid, phase, other, other_off, pos, axis, design: KitDesign) -> tuple[int, int] | None:
     """(column offset, row offset) of ``grid`` from a fixed neighbouring region ``other``.
 
     Rows are matched along the specimen's axis between the two regions' facing columns; the
@@ -124,8 +125,8 @@ def _bridge(grid, phase, other, other_off, pos, axis, design) -> tuple[int, int]
     and must be the one value within 1.5 columns of that estimate that puts this region's
     larger dots on the design's larger columns and rows.
     """
-    m = design["membrane"]
-    step, first = m["large_step"], m["large_first"]
+    m = design.membrane
+    step, first = m.large_step, m.large_first
     right = np.array([axis[1], -axis[0]])
     a_nodes = np.array(list(grid.keys()))
     b_nodes = np.array(list(other.keys()))
@@ -182,7 +183,7 @@ def _bridge(grid, phase, other, other_off, pos, axis, design) -> tuple[int, int]
     ]  # fmt: skip
     if len(fits) != 1:
         return None
-    c_off = int((c_b + side * fits[0] - ja) % m["columns"])
+    c_off = int((c_b + side * fits[0] - ja) % m.columns)
     return c_off, r_off
 
 
@@ -219,31 +220,31 @@ def _row_ends(
     return out
 
 
-def _grid_ids(grid: dict, c_off: int, r_off: int, m: dict) -> dict:
+def _grid_ids(grid: dict, c_off: int, r_off: int, m: MembraneDesign) -> dict:
     """Node -> membrane ID (Eq. 4) for a region with known offsets; nodes beyond the rows left out."""
     out = {}
     for i, j in grid:
-        r, c = i + r_off, (j + c_off - 1) % m["columns"] + 1
-        if 1 <= r <= m["rows"]:  # beyond: not a membrane dot (a pedestal edge fragment, ...)
-            out[(i, j)] = (r - 1) * m["columns"] + c + m["first_id"] - 1
+        r, c = i + r_off, (j + c_off - 1) % m.columns + 1
+        if 1 <= r <= m.rows:  # beyond: not a membrane dot (a pedestal edge fragment, ...)
+            out[(i, j)] = (r - 1) * m.columns + c + m.first_id - 1
     return out
 
 
-def _is_membrane(ids: np.ndarray, m: dict) -> np.ndarray:
+def _is_membrane(ids: np.ndarray, m: MembraneDesign) -> np.ndarray:
     """Which of ``ids`` are membrane dot IDs (Eq. 4) of the design's membrane ``m``."""
-    k = np.asarray(ids, np.int64) - m["first_id"]
-    return (k >= 0) & (k < m["rows"] * m["columns"])
+    k = np.asarray(ids, np.int64) - m.first_id
+    return (k >= 0) & (k < m.rows * m.columns)
 
 
-def _grid_neighbour(ids: np.ndarray, m: dict, dr: int, dc: int) -> np.ndarray:
+def _grid_neighbour(ids: np.ndarray, m: MembraneDesign, dr: int, dc: int) -> np.ndarray:
     """The membrane ID ``dr`` rows and ``dc`` columns (around the specimen) from each of ``ids``
     (membrane IDs); 0 beyond the end rows."""
-    k = np.asarray(ids, np.int64) - m["first_id"]
-    row, col = k // m["columns"] + dr, (k % m["columns"] + dc) % m["columns"]
-    return np.where((row >= 0) & (row < m["rows"]), row * m["columns"] + col + m["first_id"], 0)
+    k = np.asarray(ids, np.int64) - m.first_id
+    row, col = k // m.columns + dr, (k % m.columns + dc) % m.columns
+    return np.where((row >= 0) & (row < m.rows), row * m.columns + col + m.first_id, 0)
 
 
-def _over_neighbours(ids: np.ndarray, values: np.ndarray, m: dict) -> np.ndarray:
+def _over_neighbours(ids: np.ndarray, values: np.ndarray, m: MembraneDesign) -> np.ndarray:
     """Each membrane dot's value (roundness, area) over the median of its labelled grid
     neighbours' (row and column, around the specimen); NaN where it has none or is not a
     membrane dot."""
@@ -264,7 +265,7 @@ def _over_neighbours(ids: np.ndarray, values: np.ndarray, m: dict) -> np.ndarray
     return out
 
 
-def _without_cross_support(ids: np.ndarray, m: dict) -> np.ndarray:
+def _without_cross_support(ids: np.ndarray, m: MembraneDesign) -> np.ndarray:
     """Which of ``ids`` are membrane dots with no labelled grid neighbour in the rows above or
     below (row r - 1 or r + 1, same column): labels a row's chain alone gives. Towards a
     silhouette the columns crowd and a row's chain can run on past the row's last visible dot
@@ -279,7 +280,7 @@ def _without_cross_support(ids: np.ndarray, m: dict) -> np.ndarray:
     return member & ~(above | below)
 
 
-def _membrane_row_ends(ids: np.ndarray, m: dict) -> tuple[np.ndarray, np.ndarray]:
+def _membrane_row_ends(ids: np.ndarray, m: MembraneDesign) -> tuple[np.ndarray, np.ndarray]:
     """Which of ``ids`` are membrane dots whose row neighbour on either side (column c - 1 or
     c + 1, around the specimen) is not among ``ids``, and which of those are in an end row
     (along a pedestal) with every missing neighbour's own neighbour towards the middle rows
@@ -287,9 +288,9 @@ def _membrane_row_ends(ids: np.ndarray, m: dict) -> tuple[np.ndarray, np.ndarray
     ids = np.asarray(ids, np.int64)
     member = _is_membrane(ids, m)
     labelled = ids[member]
-    row = (ids - m["first_id"]) // m["columns"]
+    row = (ids - m.first_id) // m.columns
     inward = np.where(row == 0, 1, -1)
-    end_row = member & ((row == 0) | (row == m["rows"] - 1))
+    end_row = member & ((row == 0) | (row == m.rows - 1))
     ends = np.zeros(len(ids), bool)
     gap = end_row.copy()
     for s in (-1, 1):

@@ -16,6 +16,7 @@ from scipy.spatial import cKDTree
 from triaxtrack.detect import gap_background_centroids, merged_pair_centroids
 from triaxtrack.identify.membrane import _grid_neighbour, _is_membrane
 from triaxtrack.identify.state import LABEL_COLUMNS, IdentifyParams, _Frame
+from triaxtrack.kit_design import MembraneDesign
 
 GAP_ACROSS_PX = 1.0  # a re-centred dot's window reaches this far across beyond its moment ellipse
 # two membrane dots merged in one blob (at 10 % strain, 720p) and fitted apart: on the one test
@@ -51,7 +52,13 @@ def _recentred_beside_edge(
 
 
 def _split_merged_pairs(
-    f: _Frame, uv: np.ndarray, gray: np.ndarray, free: np.ndarray, m: dict, p: IdentifyParams, detect_params
+    f: _Frame,
+    uv: np.ndarray,
+    gray: np.ndarray,
+    free: np.ndarray,
+    m: MembraneDesign,
+    p: IdentifyParams,
+    detect_params,
 ) -> pd.DataFrame:
     """Label rows (``LABEL_COLUMNS``) of membrane dots merged in pairs, each pair fitted apart
     by :func:`~triaxtrack.detect.merged_pair_centroids`.

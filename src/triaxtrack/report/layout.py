@@ -14,6 +14,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from triaxtrack.kit import membrane_radius, target_table
+from triaxtrack.kit_design import KitDesign
 
 __all__ = ["MembraneLayout", "membrane_layout"]
 
@@ -120,7 +121,7 @@ class MembraneLayout:
         return f"{self.rows} x {self.columns} membrane dots, IDs {self.first_id}..{self.last_id}"
 
 
-def membrane_layout(design: dict) -> MembraneLayout:
+def membrane_layout(design: KitDesign) -> MembraneLayout:
     """The :class:`MembraneLayout` of a kit design (``kit.load_design`` or
     ``kit.load_kit_design``), from the kit's own target table. Raises ValueError when the
     design's membrane dots do not form a full grid of at least 2 rows and 2 columns."""
@@ -138,5 +139,5 @@ def membrane_layout(design: dict) -> MembraneLayout:
         row_z_mm=z,
         col_theta_rad=theta,
         radius_mm=float(membrane_radius(design)),
-        height_mm=float(design["specimen"]["height"]),
+        height_mm=float(design.specimen.height),
     )

@@ -11,6 +11,7 @@ import numpy as np
 
 from triaxtrack import footage
 from triaxtrack.kit import board_corners_mm, board_polygons_mm
+from triaxtrack.kit_design import BoardDesign
 from triaxtrack.optics import Camera, project_air
 from triaxtrack.raster import paint_into
 from triaxtrack.simulate.config import SimulationConfig
@@ -175,7 +176,7 @@ def _corner_board_pose(
 
 
 def board_poses(
-    cfg: SimulationConfig, camera: Camera, board: dict, n: int
+    cfg: SimulationConfig, camera: Camera, board: BoardDesign, n: int
 ) -> list[tuple[np.ndarray, np.ndarray]]:
     """Seeded board poses (R, t board -> camera, mm) of a careful calibration session for a
     wide-angle camera: ``n - corner_board_count(n)`` whole boards, strongly tilted and pushed
@@ -212,7 +213,7 @@ def board_poses(
 
 
 def render_board_image(
-    camera: Camera, board: dict, R: np.ndarray, t: np.ndarray, noise: float, rng
+    camera: Camera, board: BoardDesign, R: np.ndarray, t: np.ndarray, noise: float, rng
 ) -> np.ndarray:
     """uint8 image of the checkerboard at pose (R, t) seen by ``camera`` (exact, distorted)."""
     bcam = Camera("b", camera.width, camera.height, camera.K, camera.dist, R, t)
@@ -243,7 +244,7 @@ def render_calibration(test_dir: str | Path, camera: str, out_dir: str | Path) -
     test_dir, out_dir = Path(test_dir), Path(out_dir)
     scene = load_scene(test_dir)
     cam = scene.cameras[camera]
-    board = scene.design["board"]
+    board = scene.design.board
     out_dir.mkdir(parents=True, exist_ok=True)
     rng = footage.camera_rng(scene.cfg.seed, camera, (11,))
     n = scene.cfg.calibration_images

@@ -149,17 +149,17 @@ class CameraRenderer:
         faces, then the membrane (their outlines only; the printed shapes are drawn exactly)."""
         sc = self.scene
         out = []
-        ped = sc.design["pedestal"]
-        h0 = sc.design["specimen"]["height"]
+        ped = sc.design.pedestal
+        h0 = sc.design.specimen.height
         n = PEDESTAL_QUADS
         t = 2 * np.pi * np.arange(n + 1) / n
         r_m = sc.deformation.radius + sc.deformation.membrane_thickness
         for name, z0, z1, face_z, face_sign in (
-            ("pedestal_bottom", -ped["height"], 0.0, 0.0, 1.0),
-            ("pedestal_top", h0, h0 + ped["height"], h0, -1.0),
+            ("pedestal_bottom", -ped.height, 0.0, 0.0, 1.0),
+            ("pedestal_top", h0, h0 + ped.height, h0, -1.0),
         ):
             shift = sc.deformation.top_displacement(p) if name == "pedestal_top" else np.zeros(3)
-            rad = ped["radius"]
+            rad = ped.radius
 
             def ring(r, z, shift=shift):
                 return np.c_[r * np.cos(t), r * np.sin(t), np.full_like(t, z)] + shift

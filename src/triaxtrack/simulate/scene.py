@@ -13,18 +13,19 @@ import pandas as pd
 
 from triaxtrack.deformation import Deformation
 from triaxtrack.kit import ShapeSet, load_kit_design, printed_shapes, surface_by_name, target_table
+from triaxtrack.kit_design import KitDesign
 from triaxtrack.optics import Camera, CellOptics, cell_optics, read_cameras
 from triaxtrack.simulate.config import SimulationConfig, loading_progress
 
 OCCLUDER_NEWTON_STEPS = 3  # fixed-point steps from the soil-surface height to the printed surface's
 
 
-def deformation_for(cfg: SimulationConfig, design: dict) -> Deformation:
-    s = design["specimen"]
+def deformation_for(cfg: SimulationConfig, design: KitDesign) -> Deformation:
+    s = design.specimen
     return Deformation(
-        radius=s["diameter"] / 2,
-        height=s["height"],
-        membrane_thickness=s["membrane_thickness"],
+        radius=s.diameter / 2,
+        height=s.height,
+        membrane_thickness=s.membrane_thickness,
         axial_strain=cfg.axial_strain,
         bulge_mm=cfg.bulge_mm,
         shear_mm=cfg.shear_mm,
@@ -50,7 +51,7 @@ class Scene:
 
     name: str
     cfg: SimulationConfig
-    design: dict
+    design: KitDesign
     table: pd.DataFrame
     shapes: list[ShapeSet]
     cameras: dict[str, Camera]

@@ -20,6 +20,7 @@ import pandas as pd
 
 from triaxtrack.jsonfile import write_json
 from triaxtrack.kit import load_kit_design, target_table
+from triaxtrack.kit_design import KitDesign
 from triaxtrack.stress.clock import ClockEstimate, estimate_clock_offset, offset_warning
 from triaxtrack.stress.compute import StressConfig, noise_sigma, stress_strain
 from triaxtrack.stress.log import QUANTITIES, read_load_frame_log
@@ -35,7 +36,7 @@ def measure_stress(
     volume: pd.DataFrame,
     points: pd.DataFrame,
     table: pd.DataFrame,
-    design: dict,
+    design: KitDesign,
     config: StressConfig | None = None,
     volume_config: VolumeConfig | None = None,
 ) -> tuple[pd.DataFrame, dict]:

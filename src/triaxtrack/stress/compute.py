@@ -43,6 +43,7 @@ import numpy as np
 import pandas as pd
 
 from triaxtrack.config_section import section_from_dict
+from triaxtrack.kit_design import KitDesign
 
 FILTER_PAPER_FULL_STRAIN = 0.02  # ASTM D4767: the filter-paper correction applies in full beyond 2 %
 
@@ -275,7 +276,7 @@ def stress_strain(
     sections: pd.DataFrame,
     log: pd.DataFrame,
     offset_s: float,
-    design: dict,
+    design: KitDesign,
     config: StressConfig = StressConfig(),
     offset_sigma_s: float = 0.0,
 ) -> pd.DataFrame:
@@ -289,10 +290,10 @@ def stress_strain(
     outside the log has NaN and its ``reason``. ``attrs``: ``zero_time_s``, ``load_noise_n`` and
     ``load_resolution_n`` (:func:`force_sigma`).
     """
-    spec = design["specimen"]
-    d0, h0 = float(spec["diameter"]), float(spec["height"])
+    spec = design.specimen
+    d0, h0 = float(spec.diameter), float(spec.height)
     t_m = config.membrane_thickness_mm
-    t_m = float(spec["membrane_thickness"]) if t_m is None else t_m
+    t_m = float(spec.membrane_thickness) if t_m is None else t_m
     a0 = np.pi * d0**2 / 4
     vol = volume.sort_values("frame").reset_index(drop=True)
     sec = sections.set_index("frame").reindex(vol["frame"]).reset_index(drop=True)

@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
+from triaxtrack.kit_design import KitDesign
 from triaxtrack.volume.grid import MAX_MISSING_SHARE, MembraneGrid
 from triaxtrack.volume.mesh import closed_mesh, membrane_thickness
 from triaxtrack.volume.series import FAILURES, frame_grid
@@ -66,7 +67,7 @@ def soil_rings(
 def section_areas(
     points: pd.DataFrame,
     table: pd.DataFrame,
-    design: dict,
+    design: KitDesign,
     reference_frame: int,
     t0: float | None = None,
     thickness_model: str = "area",
@@ -80,7 +81,7 @@ def section_areas(
     membrane's thinning is relative to ``reference_frame`` (volume.parquet's). A frame that
     fails has NaN and its ``section_reason``. Never raises for a frame's data."""
     if t0 is None:
-        t0 = float(design["specimen"]["membrane_thickness"])
+        t0 = float(design.specimen.membrane_thickness)
     rows = []
     grid0 = None
     try:

@@ -9,6 +9,7 @@ import numpy as np
 import pandas as pd
 
 from triaxtrack.kit import design_points, surface_by_name
+from triaxtrack.kit_design import KitDesign
 
 
 def _readonly(a: np.ndarray) -> np.ndarray:
@@ -48,7 +49,7 @@ def rigid_fit(src: np.ndarray, dst: np.ndarray) -> tuple[np.ndarray, np.ndarray]
     return rot, cd - rot @ cs
 
 
-def top_cap(points: pd.DataFrame, table: pd.DataFrame, design: dict) -> TopCap:
+def top_cap(points: pd.DataFrame, table: pd.DataFrame, design: KitDesign) -> TopCap:
     """The top cap's rigid pose from its coded targets (surface 'pedestal_top') in one frame.
 
     ``points`` has columns ``id, x_mm, y_mm, z_mm`` (mm, cell frame). The specimen's top face is
@@ -76,7 +77,7 @@ def top_cap(points: pd.DataFrame, table: pd.DataFrame, design: dict) -> TopCap:
 MIN_CAP_COLUMNS = 8  # membrane columns with their two top rows measured, for a cap from them
 
 
-def top_cap_from_membrane(points: pd.DataFrame, table: pd.DataFrame, design: dict) -> TopCap:
+def top_cap_from_membrane(points: pd.DataFrame, table: pd.DataFrame, design: KitDesign) -> TopCap:
     """The top cap's face from the membrane's topmost measured rows, where its coded targets are
     in no picture (a camera ring low down). The topmost row ``r`` with at least
     ``MIN_CAP_COLUMNS`` columns measured in it and in the row below gives, per such column, the

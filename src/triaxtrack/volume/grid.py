@@ -14,6 +14,7 @@ import scipy.sparse as sp
 from scipy.ndimage import label
 from scipy.sparse.linalg import splu
 
+from triaxtrack.kit_design import KitDesign
 from triaxtrack.volume.cap import TopCap, _readonly
 
 MAX_MISSING_SHARE = 0.6  # default: above this share of missing dots a frame is not measured (NaN)
@@ -99,12 +100,12 @@ class FaceEnds:
     cap: TopCap | None
 
 
-def face_ends(design: dict, cap: TopCap | None, t0: float | None = None) -> FaceEnds:
+def face_ends(design: KitDesign, cap: TopCap | None, t0: float | None = None) -> FaceEnds:
     """:class:`FaceEnds` from the kit design (specimen diameter, height and membrane thickness;
     ``t0`` in mm overrides the thickness) and the frame's top cap pose (None if unknown)."""
-    spec = design["specimen"]
-    t0 = float(spec["membrane_thickness"]) if t0 is None else float(t0)
-    return FaceEnds(float(spec["diameter"]) / 2, t0, float(spec["height"]), cap)
+    spec = design.specimen
+    t0 = float(spec.membrane_thickness) if t0 is None else float(t0)
+    return FaceEnds(float(spec.diameter) / 2, t0, float(spec.height), cap)
 
 
 def membrane_grid(

@@ -11,6 +11,7 @@ import pandas as pd
 
 from triaxtrack.influence import CODEC_SHIFT_COLUMNS, INFLUENCE_COLUMNS
 from triaxtrack.kit import load_kit_design, target_table
+from triaxtrack.kit_design import KitDesign
 from triaxtrack.tables import (
     OBSERVATIONS,
     POINTS,
@@ -57,7 +58,7 @@ def measured_share(points: pd.DataFrame, table: pd.DataFrame) -> float:
 
 
 def frame_grid(
-    points: pd.DataFrame, table: pd.DataFrame, design: dict, t0: float, max_missing_share: float
+    points: pd.DataFrame, table: pd.DataFrame, design: KitDesign, t0: float, max_missing_share: float
 ) -> tuple[MembraneGrid, TopCap, FaceEnds]:
     """One frame's top cap (from its coded targets, else from the membrane's top rows), face
     rings and filled membrane grid (ValueError when it fails)."""
@@ -72,7 +73,7 @@ def frame_grid(
 def _measure_frame(
     pf: pd.DataFrame,
     table: pd.DataFrame,
-    design: dict,
+    design: KitDesign,
     t0: float,
     max_missing_share: float,
     grid0: MembraneGrid | None,
@@ -153,7 +154,7 @@ def _strain_table(strain_parts: list[pd.DataFrame]) -> pd.DataFrame:
 def volume_series(
     points: pd.DataFrame,
     table: pd.DataFrame,
-    design: dict,
+    design: KitDesign,
     t0: float | None = None,
     max_missing_share: float = MAX_MISSING_SHARE,
     levels: tuple[int, int] = REFINE_LEVELS,
@@ -186,7 +187,7 @@ def volume_series(
     :func:`membrane_thickness`. Never raises for a frame's data.
     """
     if t0 is None:
-        t0 = float(design["specimen"]["membrane_thickness"])
+        t0 = float(design.specimen.membrane_thickness)
     frames = sorted(points["frame"].unique())
     membrane_ids = table.loc[table["surface"] == "membrane", "id"].to_numpy()
     rows: list[dict] = []
@@ -233,7 +234,7 @@ def volume_series(
 def volume_meshes(
     points: pd.DataFrame,
     table: pd.DataFrame,
-    design: dict,
+    design: KitDesign,
     frames: list[int],
     out_dir: str | Path,
     t0: float | None = None,
@@ -248,7 +249,7 @@ def volume_meshes(
     for the membrane's thinning is ``reference_frame`` (:func:`volume_series`'
     ``reference_frame``; None when no frame succeeded: every frame is skipped)."""
     if t0 is None:
-        t0 = float(design["specimen"]["membrane_thickness"])
+        t0 = float(design.specimen.membrane_thickness)
     grid0, ref_error = None, "no frame of the test succeeds"
     if reference_frame is not None:
         try:
