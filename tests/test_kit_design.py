@@ -52,6 +52,16 @@ def test_a_kit_export_reads_back_to_the_design_with_its_printed_codes(design, ki
     assert read_board(kit_dir) == design.board
 
 
+def test_a_board_json_of_another_printer_is_read_for_what_calibration_needs(tmp_path):
+    """target-kit.md asks board.json for the type, squares and square size (and a marker
+    dictionary if any): other keys are not read, a missing sheet margin is 0."""
+    (tmp_path / "board.json").write_text(
+        '{"type": "checkerboard", "squares_x": 9, "squares_y": 6, "square_mm": 25.0, "dictionary": null}'
+    )
+    board = read_board(tmp_path)
+    assert (board.squares_x, board.squares_y, board.square_mm, board.margin_mm) == (9, 6, 25.0, 0.0)
+
+
 def test_an_unknown_key_names_the_file_the_section_and_the_key(tmp_path):
     doc = yaml.safe_load(KIT_YAML.read_text())
     doc["membrane"]["colums"] = 64

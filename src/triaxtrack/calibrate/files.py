@@ -5,6 +5,7 @@
 from __future__ import annotations
 
 import json
+from dataclasses import fields
 from pathlib import Path
 
 import cv2
@@ -18,8 +19,11 @@ IMAGE_SUFFIXES = (".png",)  # board images of test-folder.md: calibration/<camer
 
 
 def read_board(kit_dir: str | Path) -> BoardDesign:
-    """The checkerboard of a kit export (``KIT/board.json``, less the export's ``inner_corners``
-    and ``units``: the kit design's ``board`` section); ValueError naming the file."""
+    """The checkerboard of a kit export (``KIT/board.json``: ``target-kit.md`` requires its type,
+    squares and square size) as the kit design's ``board`` section; other keys (the export's
+    ``inner_corners`` and ``units``, a marker dictionary another printer writes) are not read,
+    and a missing ``margin_mm`` (the printed sheet's, which calibration does not use) is 0.
+    ValueError naming the file."""
     path = Path(kit_dir) / "board.json"
     try:
         doc = json.loads(path.read_text())
@@ -30,7 +34,8 @@ def read_board(kit_dir: str | Path) -> BoardDesign:
                 raise ValueError(f"no {key!r}")
         if min(int(doc["squares_x"]), int(doc["squares_y"])) < 3 or float(doc["square_mm"]) <= 0:
             raise ValueError("needs at least 3 x 3 squares of positive size")
-        return board_design({k: v for k, v in doc.items() if k not in ("inner_corners", "units")})
+        known = {f.name for f in fields(BoardDesign)}
+        return board_design({"margin_mm": 0.0} | {k: v for k, v in doc.items() if k in known})
     except (OSError, ValueError, TypeError) as err:
         raise ValueError(f"{path}: not a usable calibration board: {err}") from err
 
