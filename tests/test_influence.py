@@ -10,6 +10,8 @@ independent falls far short.
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pandas as pd
 import pytest
@@ -27,8 +29,9 @@ from triaxtrack.influence import (
     shared_sigma,
 )
 from triaxtrack.volume import top_cap, volume_series
+from triaxtrack.volume.cap import TopCap
 from triaxtrack.volume.grid import grid_ids, membrane_grid
-from triaxtrack.volume.uncertainty import volume_gradient
+from triaxtrack.volume.uncertainty import height_gradient, height_sigma_mm, volume_gradient
 
 N_POINTS, N_CAMERAS, RAYS, TRIALS = 300, 12, 4, 400
 NOISE_PX, SHARED_PX = 0.05, 0.03
@@ -162,3 +165,23 @@ def test_shared_sigma_is_the_statistics_move_when_every_camera_errs_alike():
     assert shared_sigma(table, gradient) == pytest.approx(np.hypot(*moves), rel=1e-9)
     assert abs(moves[1]) > 0.1 * abs(moves[0]) > 0  # both axes count
     assert shared_sigma(table.assign(id=table["id"] + N_POINTS), gradient) == 0.0  # no point meets it
+
+
+def test_the_heights_uncertainty_counts_the_caps_fit_its_cameras_and_the_codec():
+    """The top face from 6 coded targets: alone, the fit's residual over sqrt(3n - 6); a codec
+    shift of 2 micrometres up in every target moves the face by 2 micrometres, in full; each
+    camera's influences on the targets count per camera; a cap from the membrane's rows has no
+    targets' gradient."""
+    cap = TopCap(np.eye(3), np.zeros(3), np.array([0, 0, 142.0]), np.array([0, 0, 1.0]), 142.0, 6, 0.003)
+    ids = np.arange(1, 7)
+    alone = 0.003 / np.sqrt(12)
+    assert height_sigma_mm(cap) == pytest.approx(alone)
+    grad = height_gradient(cap, ids)
+    shifts = pd.DataFrame(0.0, index=range(6), columns=list(CODEC_SHIFT_COLUMNS)).assign(id=ids)
+    shifts["codec_vz_mm"] = 0.002
+    assert height_sigma_mm(cap, None, grad, shifts) == pytest.approx(np.hypot(alone, 0.002))
+    infl = pd.DataFrame({"camera": ["a"] * 6 + ["b"] * 6, "id": np.r_[ids, ids], "ix_mm": 0.0, "iy_mm": 0.0,
+                         "iz_mm": np.r_[np.full(6, 0.004), np.full(6, -0.001)]})  # fmt: skip
+    assert height_sigma_mm(cap, infl, grad) == pytest.approx(np.hypot(0.004, 0.001))  # above the fit's
+    membrane = dataclasses.replace(cap, source="membrane top rows")
+    assert height_gradient(membrane, ids).empty

@@ -54,8 +54,9 @@ compression positive) relative to the reference frame."""
 VOLUME_RESULT = Schema(
     "volume_result",
     VOLUME.columns | {
-        "height_mm": "float64", "radial_strain": "float64", "local_axial_strain": "float64",
-        "local_axial_sigma": "float64", "local_radial_strain": "float64", "local_radial_sigma": "float64",
+        "height_mm": "float64", "axial_sigma": "float64", "radial_strain": "float64",
+        "local_axial_strain": "float64", "local_axial_sigma": "float64", "local_radial_strain": "float64",
+        "local_radial_sigma": "float64",
         "volume_change_mm3": "float64",
         "mesh_volume_mm3": "float64", "chordal_mm3": "float64", "membrane_mm3": "float64",
         "volume_sigma_mm3": "float64", "measured_fraction": "float64", "filled_dots": "Int64",
@@ -65,6 +66,10 @@ VOLUME_RESULT = Schema(
 )  # fmt: skip
 """The measured ``results/<test>/volume.parquet`` (``triaxtrack.volume.volume_series``): the
 :data:`VOLUME` columns, then ``height_mm`` (top face centre above the bottom face),
+``axial_sigma`` the standard uncertainty of ``axial_strain`` from this frame's height (its
+top cap's fit, each camera's observations taken as sharing their errors, and the codec's part
+as ``volume_sigma_mm3``'s, over H0; the reference height's own error, shared by every frame, is
+not in it),
 ``radial_strain = (volumetric - axial) / 2``; ``local_axial_strain`` and ``local_radial_strain``
 over the middle third of the reference height from the measured membrane dots there, with their
 standard errors ``local_axial_sigma``, ``local_radial_sigma`` (``triaxtrack.volume.local``; no

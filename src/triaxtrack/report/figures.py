@@ -116,6 +116,10 @@ def _strain_panel(ax: Axes, v: pd.DataFrame, t: np.ndarray) -> None:
         no_data(ax)
         return
     ax.axhline(0.0, color="0.35", lw=0.8)
+    if "axial_sigma" in v and np.isfinite(v["axial_sigma"].to_numpy(float)).any():
+        axial, sigma = 100 * v["axial_strain"].to_numpy(float), 100 * v["axial_sigma"].to_numpy(float)
+        ax.fill_between(t, axial - sigma, axial + sigma, color=PALETTE[9], alpha=0.3, lw=0,
+                        label="axial ± 1 standard uncertainty")  # fmt: skip
     for lab, col, c in drawn:
         _line(ax, t, 100 * v[col].to_numpy(float), c, lab)
     ax.legend(loc="best")
@@ -125,10 +129,10 @@ def _strain_panel(ax: Axes, v: pd.DataFrame, t: np.ndarray) -> None:
 def volume_strain_figure(volume: pd.DataFrame, width_px: int = 900) -> Figure:
     """Panels against time (s): the volume change (mm³, from ``volume_change_mm3`` or else
     ``volume_mm3`` minus its first value; with ``volume_sigma_mm3``, a band of +- 1 standard
-    uncertainty of the volume) and the axial, radial (if the column is there) and volumetric
-    strain (%, compression positive); with ``measured_fraction``, a third: the share of the
-    membrane's dots measured (%). ``volume``: a ``tables.VOLUME`` table (``VOLUME_RESULT``'s
-    columns optional)."""
+    uncertainty of the volume) and the axial (with ``axial_sigma``, its band), radial (if the
+    column is there) and volumetric strain (%, compression positive); with
+    ``measured_fraction``, a third: the share of the membrane's dots measured (%). ``volume``: a
+    ``tables.VOLUME`` table (``VOLUME_RESULT``'s columns optional)."""
     v = volume.sort_values("frame")
     t = v["time_s"].to_numpy(float)
     fraction = "measured_fraction" in v

@@ -4,6 +4,7 @@ workflow's stage, from the points to the tables and meshes (:func:`run_measure_v
 from __future__ import annotations
 
 from collections.abc import Iterator
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -45,7 +46,13 @@ from triaxtrack.volume.mesh import (
     write_ply,
 )
 from triaxtrack.volume.strains import strain_field
-from triaxtrack.volume.uncertainty import VolumeUncertainty, volume_gradient, volume_uncertainty
+from triaxtrack.volume.uncertainty import (
+    VolumeUncertainty,
+    height_gradient,
+    height_sigma_mm,
+    volume_gradient,
+    volume_uncertainty,
+)
 
 FAILURES = (ValueError, np.linalg.LinAlgError)  # what makes one frame fail (NaN and a reason)
 
@@ -91,13 +98,15 @@ def _measure_frame(
     grid, cap, ends = frame_grid(pf, table, design, t0, max_missing_share)
     thickness = membrane_thickness(grid, grid if grid0 is None else grid0, t0, model=thickness_model)
     res = specimen_volume(grid, cap, thickness, levels)
-    gradient = None
+    gradient = height = None
     shifts = pf[["id", *CODEC_SHIFT_COLUMNS]] if all(c in pf.columns for c in CODEC_SHIFT_COLUMNS) else None
     if influence is not None or shifts is not None:
         cap_ids = table.loc[table["surface"] == "pedestal_top", "id"]
         on_cap = pf.loc[pf["id"].isin(cap_ids)].dropna(subset=["x_mm", "y_mm", "z_mm"])["id"].unique()
         gradient = volume_gradient(grid, grid_ids(table), cap, on_cap, res.volume_mm3)
+        height = height_gradient(cap, on_cap)
     unc = volume_uncertainty(grid, ends, cap, res.volume_mm3, influence, gradient, shifts)
+    unc = replace(unc, height_mm=height_sigma_mm(cap, influence, height, shifts))
     watertight = check_mesh(*closed_mesh(grid, cap))["watertight"] if check else pd.NA
     return grid, cap, res, unc, watertight
 
@@ -132,7 +141,8 @@ def _volume_figures(
     volumetric = (v0 - res.volume_mm3) / v0
     return {
         "volume_mm3": res.volume_mm3, "axial_strain": axial, "volumetric_strain": volumetric,
-        "height_mm": res.height_mm, "radial_strain": (volumetric - axial) / 2,
+        "height_mm": res.height_mm, "axial_sigma": unc.height_mm / h0,
+        "radial_strain": (volumetric - axial) / 2,
         "volume_change_mm3": res.volume_mm3 - v0, "mesh_volume_mm3": res.mesh_volume_mm3,
         "chordal_mm3": res.chordal_mm3, "membrane_mm3": res.membrane_mm3,
         "volume_sigma_mm3": unc.sigma_mm3, "filled_dots": res.filled_dots, "watertight": watertight,

@@ -70,6 +70,7 @@ class VolumeUncertainty:
     cameras_mm3: float = float("nan")  # the cluster estimate (NaN: no influences given)
     cameras: int = 0  # the cameras that contribute to it
     codec_mm3: float = 0.0  # the codec correction's part (0: no shifts given)
+    height_mm: float = float("nan")  # the height's (mm, :func:`height_sigma_mm`; NaN: not computed)
 
 
 def dot_areas(xyz: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -154,6 +155,36 @@ def volume_gradient(
         on_cap = np.asarray(cap_ids, np.int64)
         g.append(pd.DataFrame({"id": on_cap, "gx": axis[0], "gy": axis[1], "gz": axis[2]}))
     return pd.concat(g, ignore_index=True)
+
+
+def height_gradient(cap: TopCap, cap_ids: np.ndarray) -> pd.DataFrame:
+    """The height's derivative by each of the top cap's coded targets ``cap_ids`` (rows ``id, gx,
+    gy, gz``): the face's axis over their number (the face is their rigid fit); none when the cap
+    does not come from its coded targets."""
+    if cap.source != "coded targets" or not len(cap_ids):
+        return pd.DataFrame({"id": np.zeros(0, np.int64), "gx": [], "gy": [], "gz": []})
+    axis = np.asarray(cap.face_normal, float) / cap.n_targets
+    return pd.DataFrame({"id": np.asarray(cap_ids, np.int64), "gx": axis[0], "gy": axis[1], "gz": axis[2]})
+
+
+def height_sigma_mm(
+    cap: TopCap,
+    influence: pd.DataFrame | None = None,
+    gradient: pd.DataFrame | None = None,
+    shifts: pd.DataFrame | None = None,
+) -> float:
+    """1-sigma standard uncertainty (mm) of the specimen's height (its top face above the bottom
+    face, which the pedestal frame fixes), as the volume's (:func:`volume_uncertainty`): the larger
+    of the cap's rigid fit residual (``rms / sqrt(3 n - 6)``) and the cameras' cluster estimate
+    with ``influence`` and the height's ``gradient`` (:func:`height_gradient`), and the codec's part
+    with the points' ``shifts``, in quadrature."""
+    independent = cap.rms_mm / np.sqrt(max(3 * cap.n_targets - 6, 1))
+    cameras = float("nan")
+    if influence is not None and gradient is not None and len(influence) and len(gradient):
+        cameras = cluster_sigma(influence, gradient)[0]
+    part = max(independent, cameras) if np.isfinite(cameras) else independent
+    codec = shared_sigma(shifts, gradient) if shifts is not None and gradient is not None else 0.0
+    return float(np.hypot(part, codec))
 
 
 def volume_uncertainty(
