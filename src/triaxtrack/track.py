@@ -76,6 +76,7 @@ from scipy.spatial import cKDTree
 from triaxtrack.completion import Candidates, DotGrid, Found, complete_grid, grid_candidates
 from triaxtrack.nearest import crowded
 from triaxtrack.neighbour_motion import affine_flow, reference_places, unwrap_motion
+from triaxtrack.shape_check import shape_changed
 from triaxtrack.tracking_config import TrackingConfig
 from triaxtrack.window import WindowMeasure, measure_windows
 
@@ -100,6 +101,16 @@ REASONS = (
     "edge", "lost", "merged", "shape", "jump", "ambiguous", "drift", "unconfirmed", "disagrees",
     "not_recorded",
 )  # fmt: skip
+# through the frame loop a reason is its code: its index in _NAMES (0: reported), the window
+# kernel's codes (triaxtrack.window.REASON_CODES: '', 'edge', 'lost', 'merged') first
+_NAMES = np.array(("", *REASONS), dtype=object)
+_OK, _EDGE, _LOST, _MERGED, _SHAPE, _JUMP, _AMBIGUOUS, _DRIFT = range(8)
+_UNCONFIRMED, _DISAGREES, _NOT_RECORDED = range(8, 11)
+
+
+def _norm(d: np.ndarray) -> np.ndarray:
+    """(n,) the lengths of (n, 2) vectors, as ``np.linalg.norm(d, axis=1)`` (the same rounding)."""
+    return np.sqrt(d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1])
 
 
 def processed_frames(n_frames: int, fps: float, step_s: float | None) -> np.ndarray:
@@ -226,11 +237,11 @@ def _frame_motion(state: _State, pred: np.ndarray, meas: WindowMeasure, gate: fl
     known. Where no target moves within its gate of its prediction (a region moving by half the
     dot spacing or more from a standing start), nothing is known and targets are dropped, never
     locked one dot over."""
-    found = meas.reason == ""
+    found = meas.code == _OK
     miss = np.where(found[:, None], np.nan_to_num(meas.uv - pred), 0.0)
     tol = gate * state.spacing
     motion, known = unwrap_motion(miss, found, pred, state.neighbours, tol, MIN_FLOW_NEIGHBOURS)
-    seed = found & (np.linalg.norm(miss, axis=1) <= tol)
+    seed = found & (_norm(miss) <= tol)
     return np.where((known & ~seed)[:, None], motion, 0.0)
 
 
@@ -242,14 +253,14 @@ def _camera_motion(state: _State, pred: np.ndarray, meas: WindowMeasure, gate: f
     its own motion cannot tell from no motion (a 720p camera moved (3, 2) px, its dots 4.5 px
     apart: 185 observations locked one dot over); the cell-wall targets, further apart, are
     found moved."""
-    wall = (target_kind(state.ids) == CELL_WALL) & (meas.reason == "") & np.isfinite(state.ref_mass)
+    wall = (target_kind(state.ids) == CELL_WALL) & (meas.code == _OK) & np.isfinite(state.ref_mass)
     move = meas.uv[wall] - pred[wall]
-    near = np.linalg.norm(move, axis=1) <= gate * state.spacing[wall]
+    near = _norm(move) <= gate * state.spacing[wall]
     move = move[near]
     if len(move) < MIN_WALL_TARGETS:
         return np.zeros(2)
     shift = np.median(move, axis=0)
-    spread = np.median(np.linalg.norm(move - shift, axis=1))
+    spread = np.median(_norm(move - shift))
     return shift if spread <= 0.25 * gate * np.median(state.spacing[wall][near]) else np.zeros(2)
 
 
@@ -262,7 +273,7 @@ def _corrected_prediction(
     misses by the whole motion at a chunk's first frames (no velocity yet), after a step of
     several frames and when the motion changes; in steady tracking nothing moves."""
     shift = _frame_motion(state, pred, meas, cfg.gate)
-    again = np.linalg.norm(shift, axis=1) > REPREDICT_SHARE * cfg.gate * state.spacing
+    again = _norm(shift) > REPREDICT_SHARE * cfg.gate * state.spacing
     again &= np.isfinite(state.ref_mass)
     if again.any():
         new = measure_targets(gray, np.where(again[:, None], pred + shift, np.nan), state.radius, cfg)
@@ -290,23 +301,6 @@ def _vouchers(state: _State, vouch: np.ndarray, which: np.ndarray) -> np.ndarray
     return out
 
 
-def _scatter(rel: np.ndarray, use: np.ndarray) -> float:
-    """Robust standard deviation (1.4826 x MAD) of the relative mass changes ``rel`` of the
-    targets ``use`` (0 when fewer than ``MIN_SCATTER_TARGETS``)."""
-    r = rel[use & np.isfinite(rel)]
-    if len(r) < MIN_SCATTER_TARGETS:
-        return 0.0
-    return float(MAD_TO_SIGMA * np.median(np.abs(r - np.median(r))))
-
-
-def _mass_ok(mass, smass, ref, sref, fraction: float, scatter: float) -> np.ndarray:
-    """Whether normalised masses agree with reference ones: a relative change within the larger
-    of ``fraction`` and ``MASS_NOISE_K`` x its standard uncertainty: the larger of the one
-    propagated from the pixel noise of both and the ``scatter`` of the camera's targets."""
-    sigma = np.maximum(np.hypot(smass, sref) / ref, scatter)
-    return np.abs(mass / ref - 1) <= np.maximum(fraction, MASS_NOISE_K * sigma)
-
-
 def _extrapolate(state: _State) -> tuple:
     """A frame with no picture: the predictions move on by their velocities, nothing is measured
     (``not_recorded``) and ``blind`` stays as it is (no failed measurement). As :func:`_step`."""
@@ -314,7 +308,7 @@ def _extrapolate(state: _State) -> tuple:
     state.pred = state.pred + state.last_vel
     state.since = state.since + 1
     nan = np.full(n, np.nan)
-    return np.c_[nan, nan], np.zeros(n), nan, np.full(n, "not_recorded", dtype=object)
+    return np.c_[nan, nan], np.zeros(n), nan, np.full(n, _NOT_RECORDED)
 
 
 def _set_reference(
@@ -323,8 +317,8 @@ def _set_reference(
     """At the chunk's first frame a target whose centroid (``meas``) is farther than
     ``first_agreement_px`` from the identification's (``pred``) is left out of the chunk
     (``disagrees`` in ``reason``); the others' centroids and normalised masses become the reference."""
-    agree = (reason == "") & (np.linalg.norm(meas.uv - pred, axis=1) <= cfg.first_agreement_px)
-    reason[(reason == "") & ~agree] = "disagrees"
+    agree = (reason == _OK) & (_norm(meas.uv - pred) <= cfg.first_agreement_px)
+    reason[(reason == _OK) & ~agree] = _DISAGREES
     state.ref_uv = np.where(agree[:, None], meas.uv, np.nan)
     state.ref_mass = np.where(agree, meas.mass, np.nan)
     state.ref_smass = np.where(agree, meas.sigma_mass, 0.0)
@@ -337,19 +331,17 @@ def _check_measured(
     """Drop (in ``reason``) the measured targets whose normalised mass changed too much since the
     chunk's first frame or the last frame (``shape``), whose centroid (``meas``) is beyond the gate
     from ``pred`` (``jump``), and two targets on one blob (``ambiguous``: both); module docstring."""
-    uv, mass, smass = meas.uv, meas.mass, meas.sigma_mass
-    measured = reason == ""
-    with np.errstate(invalid="ignore", divide="ignore"):
-        fresh = measured & (state.blind == 0)
-        scatter = [_scatter(mass / m - 1, fresh) for m in (state.ref_mass, state.last_mass)]
-        same = _mass_ok(mass, smass, state.ref_mass, state.ref_smass, cfg.mass_change, scatter[0])
-        step = _mass_ok(mass, smass, state.last_mass, state.last_smass, cfg.mass_step, scatter[1])
-    bad_shape = measured & ~(same & (step | (state.blind > 0)))  # step: since the last frame
-    reason[bad_shape] = "shape"
-    jump = measured & (np.linalg.norm(uv - pred, axis=1) > cfg.gate * state.spacing)
-    reason[jump & (reason == "")] = "jump"
-    cand = np.nonzero(reason == "")[0]  # two targets on one blob: both dropped
-    reason[cand[crowded(uv[cand], cfg.min_separation * state.spacing[cand])]] = "ambiguous"
+    uv, measured = meas.uv, reason == _OK
+    shape = shape_changed(
+        meas.mass, meas.sigma_mass, state.ref_mass, state.ref_smass, state.last_mass, state.last_smass,
+        measured, state.blind, cfg.mass_change, cfg.mass_step, MASS_NOISE_K, MIN_SCATTER_TARGETS,
+        MAD_TO_SIGMA,
+    )  # fmt: skip
+    reason[shape] = _SHAPE
+    jump = measured & (_norm(uv - pred) > cfg.gate * state.spacing)
+    reason[jump & (reason == _OK)] = _JUMP
+    cand = np.nonzero(reason == _OK)[0]  # two targets on one blob: both dropped
+    reason[cand[crowded(uv[cand], cfg.min_separation * state.spacing[cand])]] = _AMBIGUOUS
 
 
 def _check_flow(
@@ -362,11 +354,11 @@ def _check_flow(
     one another (a whole region can lock one dot over at once); each one that passes then vouches
     in turn, so confirmation spreads from the steadily tracked targets into a region that
     reappears. Returns the neighbours' predicted displacements (n, 2) and where there is one (n,)."""
-    ok = reason == ""
+    ok = reason == _OK
     disp = uv - state.ref_uv
     vouch = ok & (state.blind == 0)
     flow, valid = _affine_flow(state, disp, vouch)
-    drift = vouch & valid & (np.linalg.norm(disp - flow, axis=1) > cfg.max_flow_residual_px)
+    drift = vouch & valid & (_norm(disp - flow) > cfg.max_flow_residual_px)
     vouch &= ~drift
     if drift.any():  # they must not steer their neighbours' flow
         flow, valid = _affine_flow(state, disp, vouch)
@@ -375,7 +367,7 @@ def _check_flow(
         check = pending & valid
         if not check.any():
             break
-        off = check & (np.linalg.norm(disp - flow, axis=1) > cfg.max_flow_residual_px)
+        off = check & (_norm(disp - flow) > cfg.max_flow_residual_px)
         drift |= off
         pending &= ~check
         if (check & ~off).any():  # new vouchers: the flow changes
@@ -385,13 +377,13 @@ def _check_flow(
     if far.any():  # no vouchers among its nearest: the nearest vouching ones within reach
         far_flow, far_valid = _affine_flow(state, disp, vouch, _vouchers(state, vouch, far))
         check = far & far_valid
-        off = check & (np.linalg.norm(disp - far_flow, axis=1) > cfg.max_flow_residual_px)
+        off = check & (_norm(disp - far_flow) > cfg.max_flow_residual_px)
         drift |= off
         pending &= ~check
         flow = np.where(check[:, None], far_flow, flow)
         valid |= check
-    reason[drift] = "drift"
-    reason[pending] = "unconfirmed"  # found again, but no reported neighbours can vouch for it
+    reason[drift] = _DRIFT
+    reason[pending] = _UNCONFIRMED  # found again, but no reported neighbours can vouch for it
     return flow, valid
 
 
@@ -408,7 +400,7 @@ def _advance(state: _State, meas: WindowMeasure, pred: np.ndarray, reason: np.nd
     extrapolation would carry them on."""
     n, uv = len(state.ids), meas.uv
     live = max(np.isfinite(state.ref_mass).sum(), 1)
-    excused = (reason == "lost").sum() >= BLANK_SHARE * live and state.steady >= STEADY_FRAMES
+    excused = (reason == _LOST).sum() >= BLANK_SHARE * live and state.steady >= STEADY_FRAMES
     state.steady = state.steady + 1 if ok.sum() >= STEADY_SHARE * live else 0
     steady = ok & (state.blind == 0)
     moved = (uv - state.last_uv) / state.since[:, None]  # per frame since it was last reported
@@ -430,13 +422,13 @@ def _advance(state: _State, meas: WindowMeasure, pred: np.ndarray, reason: np.nd
     if excused:  # as in a frame not recorded: the prediction moves on
         virtual = pred + state.last_vel
     # found but not yet confirmed: where it was found is the best guess
-    virtual = np.where((reason == "unconfirmed")[:, None], uv, virtual)
+    virtual = np.where((reason == _UNCONFIRMED)[:, None], uv, virtual)
     state.pred = np.where(ok[:, None], uv + state.last_vel, virtual)
 
 
 def _step(state: _State, gray: np.ndarray | None, cfg: TrackingConfig, first: bool) -> tuple:
-    """Track one frame: returns (uv (n, 2), area (n,), sigma_px (n,), reason (n,)) and advances
-    the state."""
+    """Track one frame: returns (uv (n, 2), area (n,), sigma_px (n,), reason (n,): codes, indices
+    in ``_NAMES``) and advances the state."""
     if gray is None:  # no picture: extrapolate
         return _extrapolate(state)
     pred = state.pred
@@ -449,13 +441,13 @@ def _step(state: _State, gray: np.ndarray | None, cfg: TrackingConfig, first: bo
             pred = pred + shift
             meas = measure_targets(gray, probe + shift, state.radius, cfg)
         pred, meas = _corrected_prediction(state, gray, cfg, pred, meas)
-    reason = meas.reason.copy()
+    reason = meas.code.copy()
     if first:  # the tracker's centroid must agree with the detection's, or the target is left out
         _set_reference(state, meas, pred, reason, cfg)
-    reason[~np.isfinite(state.ref_mass)] = "disagrees"
+    reason[~np.isfinite(state.ref_mass)] = _DISAGREES
     _check_measured(state, meas, pred, reason, cfg)
     flow, valid = _check_flow(state, meas.uv, reason, cfg)
-    ok = reason == ""
+    ok = reason == _OK
     _advance(state, meas, pred, reason, ok, flow, valid, first)
     sigma = np.where(ok, meas.sigma_px, np.nan)
     return np.where(ok[:, None], meas.uv, np.nan), meas.area, sigma, reason
@@ -496,7 +488,7 @@ def track_frames(
                 cand = grid_candidates(grid.ids, state.ids, cand)
                 new = found.meas
                 uv, area, sigma = np.r_[uv, new.uv], np.r_[area, new.area], np.r_[sigma, new.sigma_px]
-                reason = np.r_[reason, np.full(len(found.ids), "", object)]
+                reason = np.r_[reason, np.full(len(found.ids), _OK)]
         if int(k) in report:
             parts.append((int(k), state.ids, uv, area, sigma, reason))
     if not parts:
@@ -507,7 +499,7 @@ def track_frames(
     return pd.DataFrame({
         "camera": camera, "frame": np.repeat(np.array(frame, np.int64), [len(i) for i in ids]),
         "id": np.concatenate(ids), "u_px": uv[:, 0], "v_px": uv[:, 1],
-        "area_px": np.concatenate(area), "reason": np.concatenate(reason),  # str objects: str dtype
+        "area_px": np.concatenate(area), "reason": _NAMES[np.concatenate(reason)],  # str objects: str dtype
         "sigma_px": np.concatenate(sigma),
     })  # fmt: skip
 

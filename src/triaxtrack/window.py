@@ -75,10 +75,15 @@ class WindowMeasure(NamedTuple):
     sigma_px: np.ndarray  # (N,) standard uncertainty of each centroid coordinate, pixels
     white: np.ndarray  # (N,) the window's white level, grey levels
     noise: np.ndarray  # (N,) the window's pixel noise (standard deviation), grey levels
-    reason: np.ndarray  # (N,) object: '', 'edge', 'lost' or 'merged'
+    code: np.ndarray  # (N,) int: the reason's index in REASON_CODES (0: '')
+
+    @property
+    def reason(self) -> np.ndarray:
+        """(N,) object: '', 'edge', 'lost' or 'merged'."""
+        return REASON_CODES[self.code]
 
 
-_REASONS = np.array(["", "edge", "lost", "merged"], dtype=object)  # the kernel's reason codes
+REASON_CODES = np.array(["", "edge", "lost", "merged"], dtype=object)  # the kernel's reason codes
 _U = np.uint64  # unsigned indices: numba leaves out the wrap-around of negative indices, which
 # would keep the loops from running on whole vectors
 
@@ -424,7 +429,7 @@ def _windows(shape: tuple, uv: np.ndarray, rad: np.ndarray) -> tuple[np.ndarray,
 @numba.njit(cache=True)
 def _measure_all(g: np.ndarray, uv: np.ndarray, rad: np.ndarray, ink_fraction: float,
                  disc_margin: float) -> tuple:  # fmt: skip
-    """:func:`measure_windows` (the reasons as codes: :data:`_REASONS`): the windows' levels
+    """:func:`measure_windows` (the reasons as codes: :data:`REASON_CODES`): the windows' levels
     first (the frame's noise is their median), then the blobs."""
     n = len(uv)
     half, centre, code = _windows(g.shape, uv, rad)
@@ -473,7 +478,8 @@ def measure_windows(
 
     ``radius_px`` (N,): the disc that holds a blob (its semi-major axis plus ``disc_margin_px``).
     See the module docstring for the rule; ``reason`` is 'edge' where the window leaves the image,
-    'lost' where there is no ink at the centre, 'merged' where the blob runs on beyond its disc.
+    'lost' where there is no ink at the centre, 'merged' where the blob runs on beyond its disc
+    (``code``: its index in :data:`REASON_CODES`, as the tracker keeps it).
     """
     g = np.asarray(gray).view()
     if g.dtype != np.uint8 or g.ndim != 2:
@@ -484,4 +490,4 @@ def measure_windows(
     uv_out, area, mass, smass, spx, white, noise, code = _measure_all(
         g, uv, rad, float(ink_fraction), float(disc_margin_px)
     )
-    return WindowMeasure(uv_out, area, mass, smass, spx, white, noise, _REASONS[code])
+    return WindowMeasure(uv_out, area, mass, smass, spx, white, noise, code)
