@@ -104,6 +104,7 @@ REASONS = (
 # through the frame loop a reason is its code: its index in _NAMES (0: reported), the window
 # kernel's codes (triaxtrack.window.REASON_CODES: '', 'edge', 'lost', 'merged') first
 _NAMES = np.array(("", *REASONS), dtype=object)
+_REASON_STR = pd.array(_NAMES, dtype="str")  # the table's column: taken by code, not each str converted
 _OK, _EDGE, _LOST, _MERGED, _SHAPE, _JUMP, _AMBIGUOUS, _DRIFT = range(8)
 _UNCONFIRMED, _DISAGREES, _NOT_RECORDED = range(8, 11)
 
@@ -139,6 +140,7 @@ class _State:
     """Per target: the reference (chunk's first frame) and the current estimate."""
 
     ids: np.ndarray
+    kind: np.ndarray  # (n,) target_kind of each ID
     ref_uv: np.ndarray  # (n, 2) centroid at the chunk's first frame (NaN: not measured there)
     ref_mass: np.ndarray  # (n,) normalised blob mass there (summed contrast / white level)
     ref_smass: np.ndarray  # (n,) its standard uncertainty
@@ -184,11 +186,11 @@ def _init_state(labels: pd.DataFrame, cfg: TrackingConfig) -> _State:
     area = np.maximum(own["area_px"].to_numpy(np.float64), 1.0)
     roundness = np.clip(own["roundness"].to_numpy(np.float64), 0.2, 1.0)
     radius = np.sqrt(area / (np.pi * roundness)) + cfg.disc_margin_px  # semi-major axis + margin
-    n = len(ids)
+    n, kind = len(ids), target_kind(ids)
     return _State(
-        ids=ids, ref_uv=np.full((n, 2), np.nan), ref_mass=np.full(n, np.nan), ref_smass=np.zeros(n),
-        last_mass=np.full(n, np.nan), last_smass=np.zeros(n), radius=radius,
-        spacing=spacing, neighbours=_neighbours(uv, target_kind(ids)), pred=uv.copy(), last_uv=uv.copy(),
+        ids=ids, kind=kind, ref_uv=np.full((n, 2), np.nan), ref_mass=np.full(n, np.nan),
+        ref_smass=np.zeros(n), last_mass=np.full(n, np.nan), last_smass=np.zeros(n), radius=radius,
+        spacing=spacing, neighbours=_neighbours(uv, kind), pred=uv.copy(), last_uv=uv.copy(),
         last_vel=np.zeros((n, 2)), timed=np.zeros(n, bool), blind=np.zeros(n, np.int64),
         since=np.ones(n, np.int64),
     )  # fmt: skip
@@ -253,7 +255,7 @@ def _camera_motion(state: _State, pred: np.ndarray, meas: WindowMeasure, gate: f
     its own motion cannot tell from no motion (a 720p camera moved (3, 2) px, its dots 4.5 px
     apart: 185 observations locked one dot over); the cell-wall targets, further apart, are
     found moved."""
-    wall = (target_kind(state.ids) == CELL_WALL) & (meas.code == _OK) & np.isfinite(state.ref_mass)
+    wall = (state.kind == CELL_WALL) & (meas.code == _OK) & np.isfinite(state.ref_mass)
     move = meas.uv[wall] - pred[wall]
     near = _norm(move) <= gate * state.spacing[wall]
     move = move[near]
@@ -287,7 +289,7 @@ def _vouchers(state: _State, vouch: np.ndarray, which: np.ndarray) -> np.ndarray
     within ``FAR_NEIGHBOURS`` times their spacing (index n: none); other rows empty."""
     n = len(state.ids)
     out = np.full((n, NEIGHBOURS), n, np.int64)
-    kinds = target_kind(state.ids)
+    kinds = state.kind
     for kind in np.unique(kinds[which]):
         pool = np.nonzero(vouch & (kinds == kind) & np.isfinite(state.ref_uv).all(axis=1))[0]
         rows = np.nonzero(which & (kinds == kind))[0]
@@ -499,7 +501,7 @@ def track_frames(
     return pd.DataFrame({
         "camera": camera, "frame": np.repeat(np.array(frame, np.int64), [len(i) for i in ids]),
         "id": np.concatenate(ids), "u_px": uv[:, 0], "v_px": uv[:, 1],
-        "area_px": np.concatenate(area), "reason": _NAMES[np.concatenate(reason)],  # str objects: str dtype
+        "area_px": np.concatenate(area), "reason": _REASON_STR.take(np.concatenate(reason)),
         "sigma_px": np.concatenate(sigma),
     })  # fmt: skip
 
@@ -519,7 +521,7 @@ def _complete(
         gray, cand, index.reshape(grid.ids.shape), uv, state.radius, mass,
         lambda g, p, r: measure_targets(g, p, r, cfg), aspect=grid.aspect, gate=cfg.gate,
         min_separation=cfg.min_separation, max_fit_px=cfg.max_flow_residual_px,
-        cell_uv=uv[reported & (target_kind(state.ids) == CELL_WALL)], grid_ids=grid.ids,
+        cell_uv=uv[reported & (state.kind == CELL_WALL)], grid_ids=grid.ids,
     )  # fmt: skip
     if len(found.ids):
         _adopt(state, found, reported)
@@ -534,7 +536,7 @@ def _adopt(state: _State, found: Found, reported: np.ndarray) -> None:
     median of their nearest reported dots'."""
     n, m = len(state.ids), len(found.ids)
     uv = found.meas.uv
-    pool = reported & (target_kind(state.ids) == MEMBRANE) & np.isfinite(state.ref_uv).all(axis=1)
+    pool = reported & (state.kind == MEMBRANE) & np.isfinite(state.ref_uv).all(axis=1)
     pool = np.nonzero(pool)[0]
     k = min(NEIGHBOURS, len(pool))
     disp, vel = np.zeros((m, 2)), np.zeros((m, 2))  # (disp: where too few reported to place them)
@@ -555,8 +557,8 @@ def _adopt(state: _State, found: Found, reported: np.ndarray) -> None:
     state.neighbours = np.r_[np.where(state.neighbours >= n, n + m, state.neighbours), nb_new]
     mass, smass = found.meas.mass, found.meas.sigma_mass
     grow = {  # per new target: (field, value)
-        "ids": found.ids, "ref_uv": uv - disp, "ref_mass": mass, "ref_smass": smass,
-        "last_mass": mass, "last_smass": smass, "radius": found.radius,
+        "ids": found.ids, "kind": target_kind(found.ids), "ref_uv": uv - disp, "ref_mass": mass,
+        "ref_smass": smass, "last_mass": mass, "last_smass": smass, "radius": found.radius,
         "spacing": found.spacing, "pred": uv + vel, "last_uv": uv, "last_vel": vel,
         "timed": np.full(m, bool(k)), "blind": np.zeros(m, np.int64), "since": np.ones(m, np.int64),
     }  # fmt: skip
