@@ -76,7 +76,7 @@ from scipy.spatial import cKDTree
 from triaxtrack.completion import Candidates, DotGrid, Found, complete_grid, grid_candidates
 from triaxtrack.nearest import crowded
 from triaxtrack.neighbour_motion import affine_flow, reference_places, unwrap_motion
-from triaxtrack.shape_check import shape_changed
+from triaxtrack.track_kernels import advance, shape_changed
 from triaxtrack.tracking_config import TrackingConfig
 from triaxtrack.window import WindowMeasure, measure_windows
 
@@ -400,32 +400,18 @@ def _advance(state: _State, meas: WindowMeasure, pred: np.ndarray, reason: np.nd
     not count against them, so those reported before it still vouch after it. A frame whose
     windows catch ink in the wrong places is not blank: its predictions may be wrong, and blind
     extrapolation would carry them on."""
-    n, uv = len(state.ids), meas.uv
     live = max(np.isfinite(state.ref_mass).sum(), 1)
     excused = (reason == _LOST).sum() >= BLANK_SHARE * live and state.steady >= STEADY_FRAMES
     state.steady = state.steady + 1 if ok.sum() >= STEADY_SHARE * live else 0
-    steady = ok & (state.blind == 0)
-    moved = (uv - state.last_uv) / state.since[:, None]  # per frame since it was last reported
-    smoothed = VELOCITY_SMOOTHING * state.last_vel + (1 - VELOCITY_SMOOTHING) * moved
-    vel = np.where(state.timed[:, None], smoothed, moved)
-    state.last_vel = np.where(steady[:, None], vel, state.last_vel)
-    state.timed = state.timed | (steady & (not first))
-    state.last_uv = np.where(ok[:, None], uv, state.last_uv)
-    state.last_mass = np.where(ok, meas.mass, state.last_mass)
-    state.last_smass = np.where(ok, meas.sigma_mass, state.last_smass)
-    state.blind = np.where(ok, 0, state.blind if excused else state.blind + 1)
-    state.since = np.where(ok, 1, state.since + 1)
-    if first:
-        state.last_vel = np.zeros((n, 2))
-    # next frame: constant velocity; a dropped target moves with its neighbours, or else blind
-    blind_pred = state.last_uv + state.last_vel * state.since[:, None]
-    virtual = np.where(valid[:, None], state.ref_uv + flow, blind_pred)
-    virtual = np.where(np.isfinite(virtual), virtual, blind_pred)
-    if excused:  # as in a frame not recorded: the prediction moves on
-        virtual = pred + state.last_vel
-    # found but not yet confirmed: where it was found is the best guess
-    virtual = np.where((reason == _UNCONFIRMED)[:, None], uv, virtual)
-    state.pred = np.where(ok[:, None], uv + state.last_vel, virtual)
+    # velocities, smoothed once known; the next frame: constant velocity, a dropped target moved
+    # with its neighbours or else blind, one found but not yet confirmed where it was found (the
+    # best guess); in a blank frame, as in a frame not recorded, the prediction moves on
+    s = state
+    s.last_uv, s.last_vel, s.last_mass, s.last_smass, s.timed, s.blind, s.since, s.pred = advance(
+        meas.uv, meas.mass, meas.sigma_mass, ok, reason == _UNCONFIRMED, flow, valid, s.ref_uv, pred,
+        s.last_uv, s.last_vel, s.last_mass, s.last_smass, s.timed, s.blind, s.since, bool(excused), first,
+        VELOCITY_SMOOTHING,
+    )  # fmt: skip
 
 
 def _step(state: _State, gray: np.ndarray | None, cfg: TrackingConfig, first: bool) -> tuple:
