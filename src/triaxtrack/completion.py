@@ -157,18 +157,20 @@ def _interpolate(
     size = (2 * reach + 1) ** 2
     du, dv, uu, vv = np.empty(size), np.empty(size), np.empty(size), np.empty(size)
     beside = np.full((m, 3), np.nan)
+    side = np.zeros(2 * reach + 1, np.int64)  # reported dots per row offset
+    cside = np.zeros(2 * reach + 1, np.int64)  # reported dots per column offset
     for i in range(m):
         at_left = at_right = -1  # the reported dots beside it in its row
         k = 0
-        side = np.zeros(2 * reach + 1, np.int64)  # reported dots per row offset
-        cside = np.zeros(2 * reach + 1, np.int64)  # reported dots per column offset
+        side[:], cside[:] = 0, 0
         big = 0.0
         for dr in range(-reach, reach + 1):
             r = row[i] + dr
             if r < 0 or r >= rows:
                 continue
             for dc in range(-reach, reach + 1):
-                j = where[r, (col[i] + dc) % cols]
+                c = col[i] + dc
+                j = where[r, c if 0 <= c < cols else c % cols]  # columns wrap around
                 if (dr == 0 and dc == 0) or j < 0 or not np.isfinite(uv[j, 0]):
                     continue
                 du[k], dv[k], uu[k], vv[k] = dr, dc, uv[j, 0], uv[j, 1]
