@@ -425,7 +425,7 @@ def _step(state: _State, gray: np.ndarray | None, cfg: TrackingConfig, first: bo
     meas = measure_targets(gray, probe, state.radius, cfg)
     if not first:  # the camera's own motion (a knock), then the motion the frame shows
         shift = _camera_motion(state, pred, meas, cfg.gate)
-        if np.hypot(*shift) > REPREDICT_SHARE * cfg.gate * np.median(state.spacing):
+        if shift.any() and np.hypot(*shift) > REPREDICT_SHARE * cfg.gate * np.median(state.spacing):
             pred = pred + shift
             meas = measure_targets(gray, probe + shift, state.radius, cfg)
         pred, meas = _corrected_prediction(state, gray, cfg, pred, meas)
