@@ -26,11 +26,11 @@ from triaxtrack.optics import cell_optics, read_cameras
 from triaxtrack.sfm import REFERENCE_FRAME
 from triaxtrack.sfm_stage import run_reconstruct_cell
 from triaxtrack.simulate import SimulationConfig, make_cameras
+from triaxtrack.specimen_stage import run_trace_specimen
 from triaxtrack.tables import FRAME_MAP, LABELS, OBSERVATIONS, POINTS, TRACKS, read_table, write_table
 from triaxtrack.testfolder import read_test_fps, read_test_yaml
 from triaxtrack.timesteps import MOTION, run_collect_timesteps, run_triangulate_chunk
 from triaxtrack.track_stage import run_track_targets
-from triaxtrack.triangulate import run_trace_specimen
 
 ROOT = Path(__file__).resolve().parents[1]
 CONFIG = yaml.safe_load((ROOT / "config" / "config.yaml").read_text())

@@ -36,6 +36,7 @@ from triaxtrack.kit import load_kit_design, target_table
 from triaxtrack.optics import Camera, CellOptics, project_air, read_cameras
 from triaxtrack.reconstruction_config import SfmConfig, TriangulationConfig
 from triaxtrack.refractive_pose import pnp_pose
+from triaxtrack.specimen_stage import quality_cell
 from triaxtrack.tables import (
     LABELS,
     OBSERVATIONS,
@@ -49,7 +50,7 @@ from triaxtrack.tables import (
 )
 from triaxtrack.testfolder import read_quality, read_test_fps
 from triaxtrack.tracking_config import TrackingConfig
-from triaxtrack.triangulate import quality_cell, triangulate_refracted
+from triaxtrack.triangulate import triangulate_refracted
 
 MIN_WALL_TARGETS = 5  # fewer tracked cell-wall targets in a frame: the camera cannot be checked
 MIN_REPOSE_TARGETS = 12  # cell-wall targets a moved camera is posed again from (as the first frame's PnP)

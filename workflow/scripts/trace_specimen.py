@@ -1,7 +1,7 @@
 """Rule trace_specimen: the first frame's targets in the water, the cell frame, the outputs."""
 
 from triaxtrack.logs import log_to
-from triaxtrack.triangulate import run_trace_specimen
+from triaxtrack.specimen_stage import run_trace_specimen
 
 log_to(snakemake.log[0])
 
