@@ -8,7 +8,7 @@ rule calibrate_camera:
         kit=get_test_kit,
         videos_checked=get_videos_checked,
     output:
-        calibration="results/{test}/calibration/{camera}.json",
+        calibration=R.calibration,
     log:
         "logs/{test}/calibrate_camera/{camera}.log",
     benchmark:

@@ -1,7 +1,8 @@
 """Shared parse-time logic: config validation, the tests, cameras, chunks, input functions.
 
 Everything a rule needs that depends on wildcards is a `get_*` function here, so rules stay
-declarative (no lambdas). Paths are relative to the working directory (the repository root).
+declarative (no lambdas). Paths are relative to the working directory (the repository root);
+every file's path pattern is triaxtrack.layout's, under results/{test} (`R`) or a test folder.
 """
 
 import math
@@ -16,11 +17,14 @@ from snakemake.logging import logger
 from snakemake.utils import validate
 
 from triaxtrack.errors import schema_problems, source_of
+from triaxtrack.layout import CSV_TABLES, RESULTS, TEST_FOLDER
 from triaxtrack.testfolder import TEST_YAML, TestFolder, TestFolderError
 
 CONFIG_SCHEMA_PATH = workflow.source_path("../schemas/config.schema.yaml")
 TEST_SCHEMA_PATH = workflow.source_path("../schemas/test.schema.yaml")
 KIT_DIR = "results/kit"
+# every file of results/<test>/ (R.points, ...; R.simulated: a simulated test's test folder)
+R = RESULTS.under("results/{test}")
 # simulated cameras are cam01..camNN (the schema caps NN at 32)
 CAMERA_NAME_DIGITS = 2
 # chunk ids are 0000, 0001, ...: keep in step with the `chunk` wildcard constraint
@@ -207,8 +211,13 @@ def get_test_dir(test):
     configured folder for recorded ones."""
     spec = _spec(test)
     if "simulate" in spec:
-        return str(Path("results") / test / "simulated")
+        return R.simulated.root.format(test=test)
     return spec["path"]
+
+
+def _test_folder(test):
+    """The test folder's file patterns (triaxtrack.layout.TestFolderLayout)."""
+    return TEST_FOLDER.under(get_test_dir(test))
 
 
 def get_cameras(test):
@@ -324,7 +333,7 @@ def get_segment_frames(wildcards):
 def get_camera_chunk_videos(wildcards):
     """All video segments of one simulated camera, in frame order."""
     return expand(
-        "results/{test}/sim_chunks/{camera}/{segment}.mp4",
+        R.sim_chunk_video,
         test=wildcards.test,
         camera=wildcards.camera,
         segment=get_segments(wildcards.test),
@@ -334,7 +343,7 @@ def get_camera_chunk_videos(wildcards):
 def get_chunk_observations(wildcards):
     """Truth observations of every video segment of every camera of a simulated test."""
     return expand(
-        "results/{test}/sim_chunks/{camera}/{segment}.parquet",
+        R.sim_chunk_observations,
         test=wildcards.test,
         camera=get_cameras(wildcards.test),
         segment=get_segments(wildcards.test),
@@ -344,7 +353,7 @@ def get_chunk_observations(wildcards):
 def get_sim_videos(wildcards):
     """The joined video of every camera of a simulated test."""
     return expand(
-        "results/{test}/simulated/videos/{camera}.mp4",
+        R.simulated.video,
         test=wildcards.test,
         camera=get_cameras(wildcards.test),
     )
@@ -353,7 +362,7 @@ def get_sim_videos(wildcards):
 def get_sim_calibrations(wildcards):
     """The calibration image folder of every camera of a simulated test."""
     return expand(
-        "results/{test}/simulated/calibration/{camera}",
+        R.simulated.calibration_images,
         test=wildcards.test,
         camera=get_cameras(wildcards.test),
     )
@@ -362,7 +371,7 @@ def get_sim_calibrations(wildcards):
 def get_sim_board_poses(wildcards):
     """The true calibration-board poses of every camera of a simulated test."""
     return expand(
-        "results/{test}/simulated/truth/calibration/{camera}.json",
+        R.simulated.truth.board_poses,
         test=wildcards.test,
         camera=get_cameras(wildcards.test),
     )
@@ -372,7 +381,7 @@ def get_sim_board_poses(wildcards):
 
 
 def _recorded_video(test, camera):
-    return str(Path(get_test_dir(test)) / "videos" / f"{camera}.mp4")
+    return _test_folder(test).video.format(camera=camera)
 
 
 def get_recorded_video(wildcards):
@@ -382,7 +391,7 @@ def get_recorded_video(wildcards):
 
 def get_recorded_test_yaml(wildcards):
     """TEST_DIR/test.yaml of a recorded test."""
-    return str(Path(get_test_dir(wildcards.test)) / "test.yaml")
+    return _test_folder(wildcards.test).test_yaml
 
 
 def get_recorded_spec(wildcards):
@@ -402,14 +411,14 @@ def get_videos_checked(wildcards):
     video stops the test, naming the file, before any heavy job runs; none for a simulated
     test."""
     if "recorded" in _spec(wildcards.test):
-        return f"results/{wildcards.test}/inventory.json"
+        return R.inventory.format(test=wildcards.test)
     return []
 
 
 def get_inventory_probes(wildcards):
     """The probe of every camera's video of a recorded test, in test.yaml's camera order."""
     return expand(
-        "results/{test}/inventory/{camera}.json",
+        R.probe,
         test=wildcards.test,
         camera=get_cameras(wildcards.test),
     )
@@ -428,21 +437,23 @@ def _check_camera(wildcards):
 
 def get_test_yaml(wildcards):
     """TEST_DIR/test.yaml of any test (simulated: written by simulate_scene)."""
-    return str(Path(get_test_dir(wildcards.test)) / "test.yaml")
+    return _test_folder(wildcards.test).test_yaml
 
 
 def get_test_kit(wildcards):
     """The kit folder of any test: the simulated test's kit/, or test.yaml's `kit`."""
     spec = _spec(wildcards.test)
     if "simulate" in spec:
-        return str(Path(get_test_dir(wildcards.test)) / "kit")
+        return _test_folder(wildcards.test).kit
     return str(Path(get_test_dir(wildcards.test)) / spec["recorded"]["kit"])
 
 
 def get_calibration_folder(wildcards):
     """TEST_DIR/calibration/<camera>: the camera's board images."""
     _check_camera(wildcards)
-    return str(Path(get_test_dir(wildcards.test)) / "calibration" / wildcards.camera)
+    return _test_folder(wildcards.test).calibration_images.format(
+        camera=wildcards.camera
+    )
 
 
 def get_calibration_images(wildcards):
@@ -458,9 +469,7 @@ def get_calibration_images(wildcards):
 def get_camera_video(wildcards):
     """TEST_DIR/videos/<camera>.mp4 of any test."""
     _check_camera(wildcards)
-    return str(
-        Path(get_test_dir(wildcards.test)) / "videos" / f"{wildcards.camera}.mp4"
-    )
+    return _recorded_video(wildcards.test, wildcards.camera)
 
 
 def get_frame_count_video(wildcards):
@@ -479,7 +488,7 @@ def get_frame_count_video(wildcards):
 def get_calibrations(wildcards):
     """The calibration result of every camera of a test."""
     return expand(
-        "results/{test}/calibration/{camera}.json",
+        R.calibration,
         test=wildcards.test,
         camera=get_cameras(wildcards.test),
     )
@@ -488,7 +497,7 @@ def get_calibrations(wildcards):
 def get_chunk_labels(wildcards):
     """The identification tables of every camera and chunk of a test."""
     return expand(
-        "results/{test}/identify/{camera}/{chunk}.parquet",
+        R.chunk_labels,
         test=wildcards.test,
         camera=get_cameras(wildcards.test),
         chunk=get_chunks(wildcards.test),
@@ -507,7 +516,7 @@ def _chunk_files(wildcards, pattern):
 def get_chunk_tracks(wildcards):
     """The tracks of every camera through one chunk."""
     return expand(
-        "results/{test}/track/{camera}/{chunk}.parquet",
+        R.tracks,
         test=wildcards.test,
         camera=get_cameras(wildcards.test),
         chunk=wildcards.chunk,
@@ -516,13 +525,13 @@ def get_chunk_tracks(wildcards):
 
 def get_all_tracks(wildcards):
     """The tracks of every camera and chunk of a test."""
-    return _chunk_files(wildcards, "results/{test}/track/{camera}/{chunk}.parquet")
+    return _chunk_files(wildcards, R.tracks)
 
 
 def get_camera_tracks(wildcards):
     """One camera's tracks through every chunk, in frame order."""
     return expand(
-        "results/{test}/track/{camera}/{chunk}.parquet",
+        R.tracks,
         test=wildcards.test,
         camera=wildcards.camera,
         chunk=get_chunks(wildcards.test),
@@ -539,7 +548,7 @@ def get_codec_lags(wildcards):
     ):
         return []
     return expand(
-        "results/{test}/codec_lag/{camera}.json",
+        R.codec_lag,
         test=wildcards.test,
         camera=get_cameras(wildcards.test),
     )
@@ -547,15 +556,13 @@ def get_codec_lags(wildcards):
 
 def get_all_handovers(wildcards):
     """The targets every camera's chunk carried to the next chunk's first frame."""
-    return _chunk_files(
-        wildcards, "results/{test}/track/{camera}/{chunk}_handover.parquet"
-    )
+    return _chunk_files(wildcards, R.handover)
 
 
 def get_timestep_points(wildcards):
     """The points of every chunk's processed frames."""
     return expand(
-        "results/{test}/timesteps/{chunk}.parquet",
+        R.chunk_points,
         test=wildcards.test,
         chunk=get_chunks(wildcards.test),
     )
@@ -564,7 +571,7 @@ def get_timestep_points(wildcards):
 def get_timestep_residuals(wildcards):
     """The observations (used or not) of every chunk's processed frames."""
     return expand(
-        "results/{test}/timesteps/{chunk}_residuals.parquet",
+        R.chunk_residuals,
         test=wildcards.test,
         chunk=get_chunks(wildcards.test),
     )
@@ -573,7 +580,7 @@ def get_timestep_residuals(wildcards):
 def get_timestep_motion(wildcards):
     """The camera-motion check of every chunk."""
     return expand(
-        "results/{test}/timesteps/{chunk}_motion.parquet",
+        R.chunk_motion,
         test=wildcards.test,
         chunk=get_chunks(wildcards.test),
     )
@@ -601,7 +608,7 @@ def get_load_frame_log(wildcards):
         )
     spec = _spec(test)
     if "simulate" in spec:
-        return str(Path(get_test_dir(test)) / "loadframe.csv")
+        return _test_folder(test).load_frame_log
     return str(Path(get_test_dir(test)) / spec["recorded"]["load_frame"]["file"])
 
 
@@ -616,83 +623,71 @@ def get_final_outputs():
     and the stress figures (simulated: the log and its truth).
     """
     outputs = [KIT_DIR]
+    S = R.simulated
     for test in SIMULATED:
         outputs += expand(
             [
-                "results/{test}/simulated/test.yaml",
-                "results/{test}/simulated/kit",
-                "results/{test}/simulated/truth/cameras.json",
-                "results/{test}/simulated/truth/volume.parquet",
-                "results/{test}/simulated/truth/scene.json",
-                "results/{test}/simulated/truth/points.parquet",
-                "results/{test}/simulated/truth/observations.parquet",
-                "results/{test}/simulation_check.json",
+                S.test_yaml,
+                S.kit,
+                S.truth.cameras,
+                S.truth.volume,
+                S.truth.scene,
+                S.truth.points,
+                S.truth.observations,
+                R.simulation_check,
             ],
             test=test,
         )
         outputs += expand(
-            [
-                "results/{test}/simulated/videos/{camera}.mp4",
-                "results/{test}/simulated/calibration/{camera}",
-                "results/{test}/simulated/truth/calibration/{camera}.json",
-            ],
+            [S.video, S.calibration_images, S.truth.board_poses],
             test=test,
             camera=get_cameras(test),
         )
     for test in RECORDED:
-        outputs += expand("results/{test}/inventory.json", test=test)
+        outputs += expand(R.inventory, test=test)
     for test in TESTS:
         outputs += expand(
-            [
-                "results/{test}/calibration/{camera}.json",
-                "results/{test}/frames/{camera}.parquet",
-            ],
-            test=test,
-            camera=get_cameras(test),
+            [R.calibration, R.frames], test=test, camera=get_cameras(test)
         )
         outputs += expand(
             [
-                "results/{test}/labels.parquet",
-                "results/{test}/cameras.json",
-                "results/{test}/points.parquet",
-                "results/{test}/observations.parquet",
-                "results/{test}/tracking.parquet",
-                "results/{test}/quality.json",
-                "results/{test}/volume.parquet",
-                "results/{test}/strains.parquet",
-                "results/{test}/mesh",
-                "results/{test}/report/volume_strain.png",
-                "results/{test}/report/strain_maps.png",
-                "results/{test}/report/reprojection.png",
-                "results/{test}/report/tracking.png",
-                "results/{test}/report/specimen.mp4",
-                "results/{test}/report/specimen.html",
-                "results/{test}/reconstruction/reconstruction.png",
-                "results/{test}/volume.csv",
-                "results/{test}/paraview",
-                "results/{test}/report/viewer.html",
+                R.labels,
+                R.cameras,
+                R.points,
+                R.observations,
+                R.tracking,
+                R.quality,
+                R.volume,
+                R.strains,
+                R.mesh,
+                R.volume_strain_figure,
+                R.strain_maps_figure,
+                R.reprojection_figure,
+                R.tracking_figure,
+                R.specimen_movie,
+                R.specimen_player,
+                R.reconstruction_picture,
+                R.csv_of("volume"),
+                R.paraview,
+                R.viewer,
             ],
             test=test,
         )
         if has_load_frame(test):
             outputs += expand(
                 [
-                    "results/{test}/stress_strain.parquet",
-                    "results/{test}/stress_strain.csv",
-                    "results/{test}/clock.json",
-                    "results/{test}/report/q_strain.png",
-                    "results/{test}/report/volumetric_strain.png",
-                    "results/{test}/report/modulus.png",
+                    R.stress_strain,
+                    R.csv_of("stress_strain"),
+                    R.clock,
+                    R.q_strain_figure,
+                    R.volumetric_strain_figure,
+                    R.modulus_figure,
                 ],
                 test=test,
             )
         if test in SIMULATED and has_load_frame(test):
             outputs += expand(
-                [
-                    "results/{test}/simulated/loadframe.csv",
-                    "results/{test}/simulated/truth/loadframe.json",
-                    "results/{test}/simulated/truth/stress_strain.parquet",
-                ],
+                [S.load_frame_log, S.truth.load_frame, S.truth.stress_strain],
                 test=test,
             )
     return outputs

@@ -9,7 +9,7 @@ rule frame_map:
         frame_count_video=get_frame_count_video,
         videos_checked=get_videos_checked,
     output:
-        frames="results/{test}/frames/{camera}.parquet",
+        frames=R.frames,
     log:
         "logs/{test}/frame_map/{camera}.log",
     benchmark:

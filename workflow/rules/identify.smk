@@ -7,13 +7,13 @@ rule identify_targets:
     """
     input:
         video=get_camera_video,
-        frames="results/{test}/frames/{camera}.parquet",
-        calibration="results/{test}/calibration/{camera}.json",
+        frames=R.frames,
+        calibration=R.calibration,
         kit=get_test_kit,
     output:
-        labels="results/{test}/identify/{camera}/{chunk}.parquet",
-        frame="results/{test}/identify/{camera}/{chunk}.png",
-        overlay="results/{test}/identify/{camera}/{chunk}_labels.png",
+        labels=R.chunk_labels,
+        frame=R.chunk_frame,
+        overlay=R.chunk_overlay,
     log:
         "logs/{test}/identify_targets/{camera}/{chunk}.log",
     benchmark:
@@ -35,7 +35,7 @@ rule collect_labels:
     input:
         labels=get_chunk_labels,
     output:
-        labels="results/{test}/labels.parquet",
+        labels=R.labels,
     log:
         "logs/{test}/collect_labels.log",
     benchmark:

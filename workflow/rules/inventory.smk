@@ -6,7 +6,7 @@ rule probe_video:
     input:
         video=get_recorded_video,
     output:
-        probe="results/{test}/inventory/{camera}.json",
+        probe=R.probe,
     log:
         "logs/{test}/probe_video/{camera}.log",
     benchmark:
@@ -29,7 +29,7 @@ rule inventory:
         test_yaml=get_recorded_test_yaml,
         probes=get_inventory_probes,
     output:
-        inventory="results/{test}/inventory.json",
+        inventory=R.inventory,
     log:
         "logs/{test}/inventory/inventory.log",
     benchmark:

@@ -11,12 +11,12 @@ rule reconstruct_cell:
     """
     input:
         calibrations=get_calibrations,
-        labels="results/{test}/labels.parquet",
+        labels=R.labels,
         kit=get_test_kit,
     output:
-        cell="results/{test}/reconstruction/cell.json",
-        points="results/{test}/reconstruction/cell_points.parquet",
-        residuals="results/{test}/reconstruction/air_residuals.parquet",
+        cell=R.cell,
+        points=R.cell_points,
+        residuals=R.air_residuals,
     log:
         "logs/{test}/reconstruct_cell.log",
     benchmark:
@@ -40,19 +40,19 @@ rule trace_specimen:
     pedestal's CTs; write cameras.json, the first-frame points, quality.json and a picture.
     """
     input:
-        cell="results/{test}/reconstruction/cell.json",
-        cell_points="results/{test}/reconstruction/cell_points.parquet",
-        air_residuals="results/{test}/reconstruction/air_residuals.parquet",
-        labels="results/{test}/labels.parquet",
+        cell=R.cell,
+        cell_points=R.cell_points,
+        air_residuals=R.air_residuals,
+        labels=R.labels,
         kit=get_test_kit,
         test_yaml=get_test_yaml,
     output:
-        cameras="results/{test}/cameras.json",
-        points="results/{test}/reconstruction/points.parquet",
-        observations="results/{test}/reconstruction/observations.parquet",
-        quality="results/{test}/reconstruction/quality.json",
-        residuals="results/{test}/reconstruction/residuals.parquet",
-        picture="results/{test}/reconstruction/reconstruction.png",
+        cameras=R.cameras,
+        points=R.first_points,
+        observations=R.first_observations,
+        quality=R.first_quality,
+        residuals=R.first_residuals,
+        picture=R.reconstruction_picture,
     log:
         "logs/{test}/trace_specimen.log",
     benchmark:

@@ -20,39 +20,39 @@ rule report_figures:
     the report (matplotlib); the membrane grid (rows, columns, IDs) is the test's kit.
     """
     input:
-        volume="results/{test}/volume.parquet",
-        strains="results/{test}/strains.parquet",
-        quality="results/{test}/quality.json",
-        tracking="results/{test}/tracking.parquet",
-        labels="results/{test}/labels.parquet",
+        volume=R.volume,
+        strains=R.strains,
+        quality=R.quality,
+        tracking=R.tracking,
+        labels=R.labels,
         kit=get_test_kit,
     output:
         volume_strain=report(
-            "results/{test}/report/volume_strain.png",
+            R.volume_strain_figure,
             caption="../report/volume_strain.rst",
             category="{test}",
             subcategory="1 volume and strain",
         ),
         strain_maps=report(
-            "results/{test}/report/strain_maps.png",
+            R.strain_maps_figure,
             caption="../report/strain_maps.rst",
             category="{test}",
             subcategory="2 strain maps",
         ),
         reprojection=report(
-            "results/{test}/report/reprojection.png",
+            R.reprojection_figure,
             caption="../report/reprojection.rst",
             category="{test}",
             subcategory="4 reconstruction quality",
         ),
         tracking=report(
-            "results/{test}/report/tracking.png",
+            R.tracking_figure,
             caption="../report/tracking.rst",
             category="{test}",
             subcategory="5 tracking",
         ),
         cameras=report(
-            "results/{test}/report/cameras.png",
+            R.cameras_figure,
             caption="../report/cameras.rst",
             category="{test}",
             subcategory="6 footage per camera",
@@ -78,18 +78,18 @@ rule specimen_movie:
     local strain, as an H.264 MP4 and an HTML page that plays it.
     """
     input:
-        points="results/{test}/points.parquet",
-        strains="results/{test}/strains.parquet",
+        points=R.points,
+        strains=R.strains,
         kit=get_test_kit,
     output:
         movie=report(
-            "results/{test}/report/specimen.mp4",
+            R.specimen_movie,
             caption="../report/specimen_movie.rst",
             category="{test}",
             subcategory="3 movie",
         ),
         player=report(
-            "results/{test}/report/specimen.html",
+            R.specimen_player,
             caption="../report/specimen_player.rst",
             category="{test}",
             subcategory="3 movie",

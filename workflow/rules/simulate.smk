@@ -8,11 +8,11 @@ rule simulate_scene:
     input:
         kit=KIT_DIR,
     output:
-        test_yaml="results/{test}/simulated/test.yaml",
-        cameras="results/{test}/simulated/truth/cameras.json",
-        volume="results/{test}/simulated/truth/volume.parquet",
-        scene="results/{test}/simulated/truth/scene.json",
-        kit=directory("results/{test}/simulated/kit"),
+        test_yaml=R.simulated.test_yaml,
+        cameras=R.simulated.truth.cameras,
+        volume=R.simulated.truth.volume,
+        scene=R.simulated.truth.scene,
+        kit=directory(R.simulated.kit),
     log:
         "logs/{test}/simulate_scene/simulate_scene.log",
     benchmark:
@@ -37,13 +37,13 @@ rule render_video_chunk:
     rounded up to whole GOPs, starting on the recorder's keyframe grid (gop_s), so that the
     joined video has keyframes there only."""
     input:
-        kit="results/{test}/simulated/kit",
-        test_yaml="results/{test}/simulated/test.yaml",
-        cameras="results/{test}/simulated/truth/cameras.json",
-        scene="results/{test}/simulated/truth/scene.json",
+        kit=R.simulated.kit,
+        test_yaml=R.simulated.test_yaml,
+        cameras=R.simulated.truth.cameras,
+        scene=R.simulated.truth.scene,
     output:
-        video=temp("results/{test}/sim_chunks/{camera}/{segment}.mp4"),
-        observations="results/{test}/sim_chunks/{camera}/{segment}.parquet",
+        video=temp(R.sim_chunk_video),
+        observations=R.sim_chunk_observations,
     log:
         "logs/{test}/render_video_chunk/{camera}/{segment}.log",
     benchmark:
@@ -67,7 +67,7 @@ rule join_camera_video:
     input:
         segments=get_camera_chunk_videos,
     output:
-        video="results/{test}/simulated/videos/{camera}.mp4",
+        video=R.simulated.video,
     log:
         "logs/{test}/join_camera_video/{camera}.log",
     benchmark:
@@ -87,13 +87,13 @@ rule join_camera_video:
 rule render_calibration:
     """Render one camera's calibration-board images, and their board poses into truth/."""
     input:
-        kit="results/{test}/simulated/kit",
-        test_yaml="results/{test}/simulated/test.yaml",
-        cameras="results/{test}/simulated/truth/cameras.json",
-        scene="results/{test}/simulated/truth/scene.json",
+        kit=R.simulated.kit,
+        test_yaml=R.simulated.test_yaml,
+        cameras=R.simulated.truth.cameras,
+        scene=R.simulated.truth.scene,
     output:
-        calibration=directory("results/{test}/simulated/calibration/{camera}"),
-        board_poses="results/{test}/simulated/truth/calibration/{camera}.json",
+        calibration=directory(R.simulated.calibration_images),
+        board_poses=R.simulated.truth.board_poses,
     log:
         "logs/{test}/render_calibration/{camera}.log",
     benchmark:
@@ -113,14 +113,14 @@ rule render_calibration:
 rule simulate_truth:
     """Gather the chunk observations into truth/points.parquet and truth/observations.parquet."""
     input:
-        kit="results/{test}/simulated/kit",
-        test_yaml="results/{test}/simulated/test.yaml",
-        cameras="results/{test}/simulated/truth/cameras.json",
-        scene="results/{test}/simulated/truth/scene.json",
+        kit=R.simulated.kit,
+        test_yaml=R.simulated.test_yaml,
+        cameras=R.simulated.truth.cameras,
+        scene=R.simulated.truth.scene,
         chunks=get_chunk_observations,
     output:
-        points="results/{test}/simulated/truth/points.parquet",
-        observations="results/{test}/simulated/truth/observations.parquet",
+        points=R.simulated.truth.points,
+        observations=R.simulated.truth.observations,
     log:
         "logs/{test}/simulate_truth/simulate_truth.log",
     benchmark:
@@ -140,18 +140,18 @@ rule simulate_truth:
 rule check_simulation:
     """Check the finished synthetic test folder against its truth; write a JSON report."""
     input:
-        kit="results/{test}/simulated/kit",
-        test_yaml="results/{test}/simulated/test.yaml",
-        cameras="results/{test}/simulated/truth/cameras.json",
-        volume="results/{test}/simulated/truth/volume.parquet",
-        scene="results/{test}/simulated/truth/scene.json",
-        points="results/{test}/simulated/truth/points.parquet",
-        observations="results/{test}/simulated/truth/observations.parquet",
+        kit=R.simulated.kit,
+        test_yaml=R.simulated.test_yaml,
+        cameras=R.simulated.truth.cameras,
+        volume=R.simulated.truth.volume,
+        scene=R.simulated.truth.scene,
+        points=R.simulated.truth.points,
+        observations=R.simulated.truth.observations,
         videos=get_sim_videos,
         calibration=get_sim_calibrations,
         board_poses=get_sim_board_poses,
     output:
-        json="results/{test}/simulation_check.json",
+        json=R.simulation_check,
     log:
         "logs/{test}/check_simulation/check_simulation.log",
     benchmark:
@@ -172,13 +172,13 @@ rule simulate_load_frame:
     """Write the simulated load-frame log (loadframe.csv) and its truth (clock offset, stress and
     strain per frame)."""
     input:
-        kit="results/{test}/simulated/kit",
-        test_yaml="results/{test}/simulated/test.yaml",
-        scene="results/{test}/simulated/truth/scene.json",
+        kit=R.simulated.kit,
+        test_yaml=R.simulated.test_yaml,
+        scene=R.simulated.truth.scene,
     output:
-        log="results/{test}/simulated/loadframe.csv",
-        truth="results/{test}/simulated/truth/loadframe.json",
-        stress="results/{test}/simulated/truth/stress_strain.parquet",
+        log=R.simulated.load_frame_log,
+        truth=R.simulated.truth.load_frame,
+        stress=R.simulated.truth.stress_strain,
     log:
         "logs/{test}/simulate_load_frame/simulate_load_frame.log",
     benchmark:

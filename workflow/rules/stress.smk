@@ -7,14 +7,14 @@ rule stress_strain:
     mean area, mid-height and smallest sections, the lab's standard q, p, p', moduli, with
     their uncertainties, per processed frame."""
     input:
-        volume="results/{test}/volume.parquet",
-        points="results/{test}/points.parquet",
+        volume=R.volume,
+        points=R.points,
         kit=get_test_kit,
         test_yaml=get_test_yaml,
         load_frame=get_load_frame_log,
     output:
-        stress="results/{test}/stress_strain.parquet",
-        clock="results/{test}/clock.json",
+        stress=R.stress_strain,
+        clock=R.clock,
     log:
         "logs/{test}/stress_strain.log",
     benchmark:
@@ -35,15 +35,15 @@ rule stress_strain:
 rule export_csv:
     """A result table as CSV beside its Parquet file (volume, stress_strain)."""
     input:
-        table="results/{test}/{table}.parquet",
+        table=R.table,
     output:
-        csv="results/{test}/{table}.csv",
+        csv=R.table_csv,
     log:
         "logs/{test}/export_csv/{table}.log",
     benchmark:
         "benchmarks/{test}/export_csv/{table}.tsv"
     wildcard_constraints:
-        table="volume|stress_strain",
+        table="|".join(CSV_TABLES),
     conda:
         "../envs/triaxtrack.yaml"
     threads: 1
@@ -58,11 +58,11 @@ rule export_paraview:
     """The membrane surface of every processed frame as a ParaView time series (VTU + PVD) with
     displacement and strain as point data."""
     input:
-        volume="results/{test}/volume.parquet",
-        points="results/{test}/points.parquet",
+        volume=R.volume,
+        points=R.points,
         kit=get_test_kit,
     output:
-        series=directory("results/{test}/paraview"),
+        series=directory(R.paraview),
     log:
         "logs/{test}/export_paraview.log",
     benchmark:
@@ -83,12 +83,12 @@ rule specimen_viewer:
     """One self-contained offline HTML page: the membrane surface coloured by a strain component,
     with a time slider."""
     input:
-        volume="results/{test}/volume.parquet",
-        points="results/{test}/points.parquet",
+        volume=R.volume,
+        points=R.points,
         kit=get_test_kit,
     output:
         html=report(
-            "results/{test}/report/viewer.html",
+            R.viewer,
             caption="../report/viewer.rst",
             category="{test}",
             subcategory="3 specimen",
@@ -114,22 +114,22 @@ rule specimen_viewer:
 rule stress_figures:
     """Deviator stress, volumetric strain and Young's modulus against axial strain."""
     input:
-        stress="results/{test}/stress_strain.parquet",
+        stress=R.stress_strain,
     output:
         q_strain=report(
-            "results/{test}/report/q_strain.png",
+            R.q_strain_figure,
             caption="../report/q_strain.rst",
             category="{test}",
             subcategory="7 stress and strain",
         ),
         volumetric=report(
-            "results/{test}/report/volumetric_strain.png",
+            R.volumetric_strain_figure,
             caption="../report/volumetric_strain.rst",
             category="{test}",
             subcategory="7 stress and strain",
         ),
         modulus=report(
-            "results/{test}/report/modulus.png",
+            R.modulus_figure,
             caption="../report/modulus.rst",
             category="{test}",
             subcategory="7 stress and strain",

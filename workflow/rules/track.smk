@@ -7,13 +7,13 @@ rule track_targets:
     stream), and on to the first frame of the next chunk for the handover check."""
     input:
         video=get_camera_video,
-        frames="results/{test}/frames/{camera}.parquet",
-        labels="results/{test}/identify/{camera}/{chunk}.parquet",
+        frames=R.frames,
+        labels=R.chunk_labels,
         test_yaml=get_test_yaml,
         kit=get_test_kit,
     output:
-        tracks="results/{test}/track/{camera}/{chunk}.parquet",
-        handover="results/{test}/track/{camera}/{chunk}_handover.parquet",
+        tracks=R.tracks,
+        handover=R.handover,
     log:
         "logs/{test}/track_targets/{camera}/{chunk}.log",
     benchmark:
@@ -37,10 +37,10 @@ rule measure_codec_lag:
     input:
         tracks=get_camera_tracks,
         video=get_camera_video,
-        frames="results/{test}/frames/{camera}.parquet",
+        frames=R.frames,
         kit=get_test_kit,
     output:
-        lags="results/{test}/codec_lag/{camera}.json",
+        lags=R.codec_lag,
     log:
         "logs/{test}/measure_codec_lag/{camera}.log",
     benchmark:
@@ -62,15 +62,15 @@ rule triangulate_chunk:
     input:
         tracks=get_chunk_tracks,
         lags=get_codec_lags,
-        cameras="results/{test}/cameras.json",
-        reference="results/{test}/reconstruction/quality.json",
-        points="results/{test}/reconstruction/points.parquet",
+        cameras=R.cameras,
+        reference=R.first_quality,
+        points=R.first_points,
         kit=get_test_kit,
         test_yaml=get_test_yaml,
     output:
-        points="results/{test}/timesteps/{chunk}.parquet",
-        residuals="results/{test}/timesteps/{chunk}_residuals.parquet",
-        motion="results/{test}/timesteps/{chunk}_motion.parquet",
+        points=R.chunk_points,
+        residuals=R.chunk_residuals,
+        motion=R.chunk_motion,
     log:
         "logs/{test}/triangulate_chunk/{chunk}.log",
     benchmark:
@@ -98,14 +98,14 @@ rule collect_timesteps:
         motion=get_timestep_motion,
         tracks=get_all_tracks,
         handovers=get_all_handovers,
-        labels="results/{test}/labels.parquet",
-        reference="results/{test}/reconstruction/quality.json",
+        labels=R.labels,
+        reference=R.first_quality,
         kit=get_test_kit,
     output:
-        points="results/{test}/points.parquet",
-        observations="results/{test}/observations.parquet",
-        tracking="results/{test}/tracking.parquet",
-        quality="results/{test}/quality.json",
+        points=R.points,
+        observations=R.observations,
+        tracking=R.tracking,
+        quality=R.quality,
     log:
         "logs/{test}/collect_timesteps.log",
     benchmark:

@@ -7,13 +7,13 @@ rule measure_volume:
     """Close the specimen's surface at every processed frame, measure its soil volume and
     strains, export the meshes of a few chosen frames as PLY."""
     input:
-        points="results/{test}/points.parquet",
-        observations="results/{test}/observations.parquet",
+        points=R.points,
+        observations=R.observations,
         kit=get_test_kit,
     output:
-        volume="results/{test}/volume.parquet",
-        strains="results/{test}/strains.parquet",
-        meshes=directory("results/{test}/mesh"),
+        volume=R.volume,
+        strains=R.strains,
+        meshes=directory(R.mesh),
     log:
         "logs/{test}/measure_volume.log",
     benchmark:
