@@ -215,9 +215,9 @@ def get_test_dir(test):
     return spec["path"]
 
 
-def _test_folder(test):
-    """The test folder's file patterns (triaxtrack.layout.TestFolderLayout)."""
-    return TEST_FOLDER.under(get_test_dir(test))
+def _test_file(test, pattern, **wildcards):
+    """A file of the test folder: a pattern of triaxtrack.layout.TEST_FOLDER, filled."""
+    return str(Path(get_test_dir(test)) / pattern.format(**wildcards))
 
 
 def get_cameras(test):
@@ -381,7 +381,7 @@ def get_sim_board_poses(wildcards):
 
 
 def _recorded_video(test, camera):
-    return _test_folder(test).video.format(camera=camera)
+    return _test_file(test, TEST_FOLDER.video, camera=camera)
 
 
 def get_recorded_video(wildcards):
@@ -391,7 +391,7 @@ def get_recorded_video(wildcards):
 
 def get_recorded_test_yaml(wildcards):
     """TEST_DIR/test.yaml of a recorded test."""
-    return _test_folder(wildcards.test).test_yaml
+    return _test_file(wildcards.test, TEST_FOLDER.test_yaml)
 
 
 def get_recorded_spec(wildcards):
@@ -437,22 +437,22 @@ def _check_camera(wildcards):
 
 def get_test_yaml(wildcards):
     """TEST_DIR/test.yaml of any test (simulated: written by simulate_scene)."""
-    return _test_folder(wildcards.test).test_yaml
+    return _test_file(wildcards.test, TEST_FOLDER.test_yaml)
 
 
 def get_test_kit(wildcards):
     """The kit folder of any test: the simulated test's kit/, or test.yaml's `kit`."""
     spec = _spec(wildcards.test)
     if "simulate" in spec:
-        return _test_folder(wildcards.test).kit
+        return _test_file(wildcards.test, TEST_FOLDER.kit)
     return str(Path(get_test_dir(wildcards.test)) / spec["recorded"]["kit"])
 
 
 def get_calibration_folder(wildcards):
     """TEST_DIR/calibration/<camera>: the camera's board images."""
     _check_camera(wildcards)
-    return _test_folder(wildcards.test).calibration_images.format(
-        camera=wildcards.camera
+    return _test_file(
+        wildcards.test, TEST_FOLDER.calibration_images, camera=wildcards.camera
     )
 
 
@@ -608,7 +608,7 @@ def get_load_frame_log(wildcards):
         )
     spec = _spec(test)
     if "simulate" in spec:
-        return _test_folder(test).load_frame_log
+        return _test_file(test, TEST_FOLDER.load_frame_log)
     return str(Path(get_test_dir(test)) / spec["recorded"]["load_frame"]["file"])
 
 
