@@ -18,6 +18,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 import pandas as pd
 
+from triaxtrack.layout import RESULTS
+
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
@@ -69,7 +71,7 @@ def camera_quality(tracks: pd.DataFrame, labels: pd.DataFrame | None = None) -> 
     return pd.DataFrame(rows, columns=QUALITY_COLUMNS)
 
 
-def score_camera_quality(quality: pd.DataFrame, source: str = "tracking.parquet") -> pd.DataFrame:
+def score_camera_quality(quality: pd.DataFrame, source: str = RESULTS.tracking) -> pd.DataFrame:
     """Reported-only score rows (``score.COLUMNS``, no tolerance) of a :func:`camera_quality`
     table, per camera: ``centroid_sigma_median``, ``centroid_sigma_p95`` (px) and
     ``tracked_share`` (0-1). A camera without reported centroids gets no sigma rows (a NaN value

@@ -64,6 +64,7 @@ def _kit(args: argparse.Namespace) -> int:
 
 def _simulate(args: argparse.Namespace) -> int:
     from triaxtrack.kit import export_kit, load_design
+    from triaxtrack.layout import TEST_FOLDER
     from triaxtrack.simulate import SimulationConfig, simulate_test
 
     opts = {
@@ -75,7 +76,7 @@ def _simulate(args: argparse.Namespace) -> int:
         opts["preset"] = args.preset  # the keys given on the command line override it
     cfg = SimulationConfig.from_dict(opts)
     out = Path(args.out)
-    kit_dir = out / "kit"
+    kit_dir = out / TEST_FOLDER.kit
     t0 = time.perf_counter()
     export_kit(load_design(args.design), kit_dir)
     simulate_test(cfg, kit_dir, out, args.name or out.name, args.chunk_size)

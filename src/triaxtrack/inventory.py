@@ -9,6 +9,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from triaxtrack.jsonfile import read_json, write_json
+from triaxtrack.layout import TEST_FOLDER
 
 FPS_REL_TOL = 1e-3  # container frame rates are rationals; 1e-3 absorbs 30000/1001 vs 29.97
 
@@ -29,7 +30,7 @@ def summarize_probes(test: dict, probes: list[dict], name: str, *, strict: bool 
     """
     counts = Counter(p["frames"] for p in probes)
     if "frames" in test:
-        expected_frames, frames_source = test["frames"], "test.yaml"
+        expected_frames, frames_source = test["frames"], TEST_FOLDER.test_yaml
     else:
         expected_frames = max(counts, key=lambda n: (counts[n], n))
         frames_source = "most common among the videos"

@@ -16,6 +16,7 @@ import pandas as pd
 
 from triaxtrack.calibrate import calibrated_camera
 from triaxtrack.kit_design import KitDesign
+from triaxtrack.layout import RESULTS, TEST_FOLDER, TRUTH
 from triaxtrack.optics import Camera, read_cameras
 from triaxtrack.score_cameras import score_calibrations, score_cameras
 from triaxtrack.score_table import AT_LEAST, COLUMNS, ScoreTolerances, _metric
@@ -78,7 +79,7 @@ def score_identification(
     table: pd.DataFrame,
     design: KitDesign,
     tol: ScoreTolerances,
-    source: str = "labels.parquet",
+    source: str = RESULTS.labels,
 ) -> pd.DataFrame:
     """Per camera and labelled frame: wrong IDs, coverage, cell-wall centroid errors.
 
@@ -129,7 +130,7 @@ def score_points(
     truth: pd.DataFrame,
     table: pd.DataFrame,
     tol: ScoreTolerances,
-    source: str = "points.parquet",
+    source: str = RESULTS.points,
 ) -> pd.DataFrame:
     """Per reconstructed frame (item ``all@<frame>``): RMS 3-D error against the truth of the
     membrane dots (``membrane_rms_error``), and reported only: their largest error
@@ -190,7 +191,7 @@ def score_tracking(
     observations: pd.DataFrame,
     truth: pd.DataFrame,
     tol: ScoreTolerances,
-    source: str = "observations.parquet",
+    source: str = RESULTS.observations,
 ) -> pd.DataFrame:
     """ID swaps: reported observations (every camera and processed frame) farther than
     ``wrong_id_px`` from their own true projection (``id_swaps``, tolerance ``tol.id_swaps``),
@@ -214,7 +215,7 @@ def score_tracking(
 
 def score_kept(
     points: pd.DataFrame, truth: pd.DataFrame, table: pd.DataFrame, tol: ScoreTolerances,
-    source: str = "points.parquet",
+    source: str = RESULTS.points,
 ) -> pd.DataFrame:  # fmt: skip
     """Share of the membrane dots visible at the start (the truth's first frame: seen by two or
     more cameras) that are still reconstructed at the last processed frame (``membrane_kept``)."""
@@ -228,7 +229,7 @@ def score_kept(
 
 
 def score_volume(
-    volume: pd.DataFrame, truth: pd.DataFrame, tol: ScoreTolerances, source: str = "volume.parquet"
+    volume: pd.DataFrame, truth: pd.DataFrame, tol: ScoreTolerances, source: str = RESULTS.volume
 ) -> pd.DataFrame:
     """Per processed frame: the volume's relative error (``volume_error``), the volume change's
     error over the true initial volume (``volume_change_error``) and the axial strain's error,
@@ -269,7 +270,7 @@ def score_volume(
     return pd.concat([out, pd.DataFrame(extra, columns=COLUMNS)]).reset_index(drop=True)
 
 
-def score_quality(quality: dict, tol: ScoreTolerances, source: str = "quality.json") -> pd.DataFrame:
+def score_quality(quality: dict, tol: ScoreTolerances, source: str = RESULTS.quality) -> pd.DataFrame:
     """The mean reprojection error of the reconstruction, over all cameras and per camera."""
     values = {"all": quality["mean_reprojection_px"]}
     values |= {name: q["mean_reprojection_px"] for name, q in sorted(quality.get("per_camera", {}).items())}
@@ -287,39 +288,39 @@ def score(results_dir: str | Path, truth_dir: str | Path, tol: ScoreTolerances |
     """
     tol = tol or ScoreTolerances()
     results_dir, truth_dir = Path(results_dir), Path(truth_dir)
-    if (truth_dir / "truth").is_dir():
-        truth_dir = truth_dir / "truth"
-    if not (truth_dir / "cameras.json").exists():
-        raise ValueError(f"{truth_dir}: no truth here (cameras.json missing)")
+    if (truth_dir / TEST_FOLDER.truth.root).is_dir():
+        truth_dir = truth_dir / TEST_FOLDER.truth.root
+    if not (truth_dir / TRUTH.cameras).exists():
+        raise ValueError(f"{truth_dir}: no truth here ({TRUTH.cameras} missing)")
     if not results_dir.is_dir():
         raise ValueError(f"{results_dir}: no such results folder")
     parts = []
-    truth_cameras = read_cameras(truth_dir / "cameras.json")
-    quality_path = results_dir / "quality.json"
+    truth_cameras = read_cameras(truth_dir / TRUTH.cameras)
+    quality_path = results_dir / RESULTS.quality
     quality = read_quality(quality_path) if quality_path.exists() else {}
-    calibrations = read_calibrations(results_dir / "calibration")
+    calibrations = read_calibrations(results_dir / Path(RESULTS.calibration).parent)
     if calibrations:
         left_out = quality.get("cameras_left_out", {})
         parts.append(score_calibrations(calibrations, truth_cameras, tol, left_out=left_out))
-    if (results_dir / "cameras.json").exists():
-        cameras = read_cameras(results_dir / "cameras.json")
+    if (results_dir / RESULTS.cameras).exists():
+        cameras = read_cameras(results_dir / RESULTS.cameras)
         parts.append(score_cameras(cameras, truth_cameras, tol, left_out=quality.get("cameras_left_out", {})))
-    if (results_dir / "labels.parquet").exists():
-        parts.append(_score_labels(results_dir / "labels.parquet", truth_dir, truth_cameras, tol))
+    if (results_dir / RESULTS.labels).exists():
+        parts.append(_score_labels(results_dir / RESULTS.labels, truth_dir, truth_cameras, tol))
     if quality:
         parts.append(score_quality(quality, tol))
-    if (results_dir / "points.parquet").exists():
-        parts.append(_score_points(results_dir / "points.parquet", truth_dir, tol))
-    if (results_dir / "tracking.parquet").exists() and (results_dir / "observations.parquet").exists():
-        parts.append(_score_tracking(results_dir / "observations.parquet", truth_dir, tol))
-    if (results_dir / "tracking.parquet").exists():
+    if (results_dir / RESULTS.points).exists():
+        parts.append(_score_points(results_dir / RESULTS.points, truth_dir, tol))
+    if (results_dir / RESULTS.tracking).exists() and (results_dir / RESULTS.observations).exists():
+        parts.append(_score_tracking(results_dir / RESULTS.observations, truth_dir, tol))
+    if (results_dir / RESULTS.tracking).exists():
         parts.append(_score_cameras_footage(results_dir))
-    if (results_dir / "volume.parquet").exists():
+    if (results_dir / RESULTS.volume).exists():
         from triaxtrack.tables import VOLUME, read_table
 
-        parts.append(score_volume(read_table(results_dir / "volume.parquet", VOLUME),
-                                  read_table(truth_dir / "volume.parquet", VOLUME), tol))  # fmt: skip
-    if (results_dir / "stress_strain.parquet").exists() and (truth_dir / "stress_strain.parquet").exists():
+        parts.append(score_volume(read_table(results_dir / RESULTS.volume, VOLUME),
+                                  read_table(truth_dir / TRUTH.volume, VOLUME), tol))  # fmt: skip
+    if (results_dir / RESULTS.stress_strain).exists() and (truth_dir / TRUTH.stress_strain).exists():
         from triaxtrack.stress.score import score_stress_files
 
         parts.append(score_stress_files(results_dir, truth_dir, tol))
@@ -338,8 +339,8 @@ def _score_labels(
     design = _test_kit(truth_dir)
     return score_identification(
         read_table(path, LABELS),
-        read_table(truth_dir / "observations.parquet", OBSERVATIONS),
-        read_table(truth_dir / "points.parquet", POINTS),
+        read_table(truth_dir / TRUTH.observations, OBSERVATIONS),
+        read_table(truth_dir / TRUTH.points, POINTS),
         cameras,
         target_table(design),
         design,
@@ -352,7 +353,7 @@ def _test_kit(truth_dir: Path) -> KitDesign:
     """The design of a test's kit/ (beside truth/)."""
     from triaxtrack.kit import load_kit_design
 
-    kit = truth_dir.parent / "kit"
+    kit = truth_dir.parent / TEST_FOLDER.kit
     if not (kit / "kit.json").exists():
         raise ValueError(f"{truth_dir}: the test's kit/ (beside truth/) is needed to score targets")
     return load_kit_design(kit)
@@ -364,7 +365,7 @@ def _score_points(path: Path, truth_dir: Path, tol: ScoreTolerances) -> pd.DataF
     from triaxtrack.tables import POINTS, read_table
 
     table = target_table(_test_kit(truth_dir))
-    truth = read_table(truth_dir / "points.parquet", POINTS)
+    truth = read_table(truth_dir / TRUTH.points, POINTS)
     points = read_table(path, POINTS)
     parts = [score_points(points, truth, table, tol, path.name)]
     if points["frame"].nunique() > 1:
@@ -376,7 +377,7 @@ def _score_tracking(path: Path, truth_dir: Path, tol: ScoreTolerances) -> pd.Dat
     """ID swaps of a results folder's observations.parquet (every tracked frame)."""
     from triaxtrack.tables import OBSERVATIONS, read_table
 
-    truth = read_table(truth_dir / "observations.parquet", OBSERVATIONS)
+    truth = read_table(truth_dir / TRUTH.observations, OBSERVATIONS)
     return score_tracking(read_table(path, OBSERVATIONS), truth, tol, path.name)
 
 
@@ -386,8 +387,8 @@ def _score_cameras_footage(results_dir: Path) -> pd.DataFrame:
     from triaxtrack.camera_report import camera_quality, score_camera_quality
     from triaxtrack.tables import TRACKS, read_table
 
-    tracks = read_table(results_dir / "tracking.parquet", TRACKS)
-    return score_camera_quality(camera_quality(tracks), "tracking.parquet")
+    tracks = read_table(results_dir / RESULTS.tracking, TRACKS)
+    return score_camera_quality(camera_quality(tracks), RESULTS.tracking)
 
 
 def format_table(df: pd.DataFrame) -> str:

@@ -9,6 +9,7 @@ from collections.abc import Collection
 import numpy as np
 import pandas as pd
 
+from triaxtrack.layout import RESULTS
 from triaxtrack.optics import Camera, pixels_to_normalized, pixels_to_undistorted
 from triaxtrack.score_table import COLUMNS, ScoreTolerances, _metric
 
@@ -69,7 +70,7 @@ def ray_direction_error(est: Camera, truth: Camera, step_px: int = UNDISTORTION_
 
 
 def score_cameras(
-    result: dict[str, Camera], truth: dict[str, Camera], tol: ScoreTolerances, source: str = "cameras.json",
+    result: dict[str, Camera], truth: dict[str, Camera], tol: ScoreTolerances, source: str = RESULTS.cameras,
     left_out: Collection[str] = (),
 ) -> pd.DataFrame:  # fmt: skip
     """Per-camera intrinsic and pose errors of estimated cameras against the true ones.
@@ -95,7 +96,7 @@ def score_cameras(
     for name in sorted(set(truth) - set(result)):  # a camera the workflow left out and said so: reported
         if name in left_out:
             why = "why: quality.json"
-            rows.append(_metric("camera_left_out", name, 1.0, unit=why, source="quality.json"))
+            rows.append(_metric("camera_left_out", name, 1.0, unit=why, source=RESULTS.quality))
         else:
             rows.append(_metric("camera_missing", name, np.nan, source=source))
     return pd.DataFrame(rows, columns=COLUMNS)
@@ -114,7 +115,7 @@ def score_calibrations(
     (``left_out``: quality.json ``cameras_left_out``), reported as in :func:`score_cameras`."""
     df = score_cameras(result, truth, tol, left_out=left_out)
     said = df["metric"] == "camera_left_out"
-    df.loc[~said, "source"] = "calibration/" + df.loc[~said, "item"] + ".json"
+    df.loc[~said, "source"] = [RESULTS.calibration.format(camera=c) for c in df.loc[~said, "item"]]
     rows = []
     for name, cam in sorted(result.items()):
         if name not in truth:

@@ -30,9 +30,10 @@ import yaml
 
 from triaxtrack.errors import schema_problems, unknown_top_level_keys
 from triaxtrack.jsonfile import read_json, write_json
+from triaxtrack.layout import TEST_FOLDER
 
-TEST_YAML = "test.yaml"
-DEFAULT_KIT = "kit"  # test.yaml's ``kit`` when it gives none: the folder kit/ beside it
+TEST_YAML = TEST_FOLDER.test_yaml
+DEFAULT_KIT = TEST_FOLDER.kit  # test.yaml's ``kit`` when it gives none: the folder kit/ beside it
 
 
 # ---------------------------------------------------------------- test.yaml

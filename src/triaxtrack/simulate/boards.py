@@ -12,6 +12,7 @@ import numpy as np
 from triaxtrack import footage
 from triaxtrack.kit import board_corners_mm, board_polygons_mm
 from triaxtrack.kit_design import BoardDesign
+from triaxtrack.layout import TEST_FOLDER
 from triaxtrack.optics import Camera, project_air
 from triaxtrack.raster import paint_into
 from triaxtrack.simulate.config import SimulationConfig
@@ -262,6 +263,6 @@ def render_calibration(test_dir: str | Path, camera: str, out_dir: str | Path) -
             "t": t.tolist(),
             "corners_px": uv.tolist(),
         })  # fmt: skip
-    truth = test_dir / "truth" / "calibration"
-    truth.mkdir(parents=True, exist_ok=True)
-    (truth / f"{camera}.json").write_text(json.dumps({"board_poses": record}))
+    truth = test_dir / TEST_FOLDER.truth.board_poses.format(camera=camera)
+    truth.parent.mkdir(parents=True, exist_ok=True)
+    truth.write_text(json.dumps({"board_poses": record}))

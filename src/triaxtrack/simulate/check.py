@@ -10,6 +10,7 @@ import numpy as np
 import pandas as pd
 
 from triaxtrack.centroid import local_centroid
+from triaxtrack.layout import TEST_FOLDER
 from triaxtrack.simulate.config import SimulationConfig, recorded_frames
 from triaxtrack.tables import OBSERVATIONS, read_table
 
@@ -63,19 +64,20 @@ def check_simulation(test_dir: str | Path, out_json: str | Path | None = None) -
 
     test_dir = Path(test_dir)
     scene_cfg = SimulationConfig.from_dict(
-        json.loads((test_dir / "truth" / "scene.json").read_text())["simulation"]
+        json.loads((test_dir / TEST_FOLDER.truth.scene).read_text())["simulation"]
     )
-    meta = read_test_yaml(test_dir / "test.yaml")
-    truth_obs = read_table(test_dir / "truth" / "observations.parquet", OBSERVATIONS)
-    targets = pd.read_csv(test_dir / "kit" / "targets.csv").set_index("id")
+    test_yaml = test_dir / TEST_FOLDER.test_yaml
+    meta = read_test_yaml(test_yaml)
+    truth_obs = read_table(test_dir / TEST_FOLDER.truth.observations, OBSERVATIONS)
+    targets = pd.read_csv(test_dir / TEST_FOLDER.kit / "targets.csv").set_index("id")
     rows, per_camera = [], {}
     for entry in camera_entries(meta["cameras"]):
         cam = entry["name"]
-        video = test_dir / "videos" / f"{cam}.mp4"
+        video = test_dir / TEST_FOLDER.video.format(camera=cam)
         info = probe_video(video)
-        n_cal = len(list((test_dir / "calibration" / cam).glob("*.png")))
+        n_cal = len(list((test_dir / TEST_FOLDER.calibration_images.format(camera=cam)).glob("*.png")))
         recorded = recorded_frames(scene_cfg, cam)
-        fmap = frame_map(read_camera_timing(test_dir / "test.yaml", cam), scene_cfg.frames, info["frames"])
+        fmap = frame_map(read_camera_timing(test_yaml, cam), scene_cfg.frames, info["frames"])
         for frame in sorted({int(recorded[0]), int(recorded[-1])}):
             image = read_test_frame(video, fmap, frame)
             if image is None:

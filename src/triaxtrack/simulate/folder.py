@@ -12,6 +12,7 @@ import pandas as pd
 import yaml
 
 from triaxtrack.kit import load_kit_design
+from triaxtrack.layout import TEST_FOLDER
 from triaxtrack.optics import write_cameras
 from triaxtrack.simulate.boards import render_calibration
 from triaxtrack.simulate.cameras import make_cameras
@@ -41,10 +42,11 @@ def make_scene(cfg: SimulationConfig, kit_dir: str | Path, test_dir: str | Path,
     :func:`render_calibration` and :func:`finish_truth`.
     """
     test_dir = Path(test_dir)
-    (test_dir / "truth").mkdir(parents=True, exist_ok=True)
-    if Path(kit_dir).resolve() != (test_dir / "kit").resolve():
-        shutil.copytree(kit_dir, test_dir / "kit", dirs_exist_ok=True, ignore=shutil.ignore_patterns(".*"))
-    design = load_kit_design(test_dir / "kit")
+    (test_dir / TEST_FOLDER.truth.root).mkdir(parents=True, exist_ok=True)
+    kit = test_dir / TEST_FOLDER.kit
+    if Path(kit_dir).resolve() != kit.resolve():
+        shutil.copytree(kit_dir, kit, dirs_exist_ok=True, ignore=shutil.ignore_patterns(".*"))
+    design = load_kit_design(kit)
     deformation = deformation_for(cfg, design)
     cams = make_cameras(cfg)
     lowest_top = deformation.current_height(1.0)  # the top cap at the end of the test
@@ -59,14 +61,15 @@ def make_scene(cfg: SimulationConfig, kit_dir: str | Path, test_dir: str | Path,
         "fps": float(cfg.fps),
         "frames": int(cfg.frames),
         "cameras": [_test_yaml_camera(cfg, c.name) for c in cams],
-        "kit": "kit",
+        "kit": TEST_FOLDER.kit,
         "simulated": True,
     }
     log_entry = load_frame_entry(cfg)  # the log itself: write_load_frame
     if log_entry is not None:
         test_yaml["load_frame"] = log_entry
-    (test_dir / "test.yaml").write_text(yaml.safe_dump(test_yaml, sort_keys=False, allow_unicode=True))
-    (test_dir / "truth" / "scene.json").write_text(json.dumps({
+    test_yaml_text = yaml.safe_dump(test_yaml, sort_keys=False, allow_unicode=True)
+    (test_dir / TEST_FOLDER.test_yaml).write_text(test_yaml_text)
+    (test_dir / TEST_FOLDER.truth.scene).write_text(json.dumps({
         "name": name,
         "simulation": asdict(cfg),
         "deformation": asdict(deformation),
@@ -74,8 +77,8 @@ def make_scene(cfg: SimulationConfig, kit_dir: str | Path, test_dir: str | Path,
                  "compression positive; volume = soil inside the membrane's inner surface, "
                  "between the pedestal faces",
     }, indent=2))  # fmt: skip
-    write_cameras(test_dir / "truth" / "cameras.json", {c.name: c for c in cams})
-    write_table(truth_volume(cfg, deformation), test_dir / "truth" / "volume.parquet", VOLUME)
+    write_cameras(test_dir / TEST_FOLDER.truth.cameras, {c.name: c for c in cams})
+    write_table(truth_volume(cfg, deformation), test_dir / TEST_FOLDER.truth.volume, VOLUME)
 
 
 def _test_yaml_camera(cfg: SimulationConfig, camera: str) -> str | dict:
@@ -152,9 +155,10 @@ def simulate_test(
             render_chunk(test_dir, cam, start, stop, seg, obs)
             segs.append(seg)
             parts.append(obs)
-        (test_dir / "videos").mkdir(exist_ok=True)
-        concat_videos(segs, test_dir / "videos" / f"{cam}.mp4")
-        render_calibration(test_dir, cam, test_dir / "calibration" / cam)
+        video = test_dir / TEST_FOLDER.video.format(camera=cam)
+        video.parent.mkdir(exist_ok=True)
+        concat_videos(segs, video)
+        render_calibration(test_dir, cam, test_dir / TEST_FOLDER.calibration_images.format(camera=cam))
     finish_truth(test_dir, parts)
     if cfg.load_frame:
         write_load_frame(test_dir)

@@ -41,11 +41,12 @@ import pandas as pd
 
 from triaxtrack.config_section import section_from_dict
 from triaxtrack.deformation import Deformation
+from triaxtrack.layout import TEST_FOLDER
 from triaxtrack.simulate.config import SimulationConfig, loading_progress
 from triaxtrack.stress.sections import SECTION_LEVELS, SECTION_MARGIN, section_heights
 from triaxtrack.tables import STRESS_TRUTH, write_table
 
-LOG_FILE = "loadframe.csv"
+LOG_FILE = TEST_FOLDER.load_frame_log  # the log, in the test folder
 NOISE_STREAM = 18  # seed stream of the log's noise (the number: independent of the renders)
 # the columns of the simulated export (GDS-like names) and what they map to (test.yaml load_frame)
 LOG_COLUMNS = {
@@ -224,5 +225,5 @@ def write_load_frame(test_dir: str | Path, settings: dict | None = None) -> None
         raise ValueError(f"{test_dir}: the simulation has no load_frame settings (no log to write)")
     log, truth, meta = simulate_load_frame(cfg, scene.deformation)
     log.to_csv(test_dir / LOG_FILE, index=False)
-    (test_dir / "truth" / "loadframe.json").write_text(json.dumps(meta, indent=2))
-    write_table(truth, test_dir / "truth" / "stress_strain.parquet", STRESS_TRUTH)
+    (test_dir / TEST_FOLDER.truth.load_frame).write_text(json.dumps(meta, indent=2))
+    write_table(truth, test_dir / TEST_FOLDER.truth.stress_strain, STRESS_TRUTH)

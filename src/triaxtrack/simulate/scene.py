@@ -14,6 +14,7 @@ import pandas as pd
 from triaxtrack.deformation import Deformation
 from triaxtrack.kit import ShapeSet, load_kit_design, printed_shapes, surface_by_name, target_table
 from triaxtrack.kit_design import KitDesign
+from triaxtrack.layout import TEST_FOLDER
 from triaxtrack.optics import Camera, CellOptics, cell_optics, read_cameras
 from triaxtrack.simulate.config import SimulationConfig, loading_progress
 
@@ -61,9 +62,9 @@ class Scene:
 
 def load_scene(test_dir: str | Path) -> Scene:
     test_dir = Path(test_dir)
-    scene = json.loads((test_dir / "truth" / "scene.json").read_text())
+    scene = json.loads((test_dir / TEST_FOLDER.truth.scene).read_text())
     cfg = SimulationConfig.from_dict(scene["simulation"])
-    design = load_kit_design(test_dir / "kit")
+    design = load_kit_design(test_dir / TEST_FOLDER.kit)
     table = target_table(design)
     return Scene(
         name=scene["name"],
@@ -71,7 +72,7 @@ def load_scene(test_dir: str | Path) -> Scene:
         design=design,
         table=table,
         shapes=printed_shapes(design, table),
-        cameras=read_cameras(test_dir / "truth" / "cameras.json"),
+        cameras=read_cameras(test_dir / TEST_FOLDER.truth.cameras),
         deformation=Deformation(**scene["deformation"]),
         cell=cell_optics(design),
     )

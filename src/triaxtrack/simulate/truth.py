@@ -10,6 +10,7 @@ import numpy as np
 import pandas as pd
 
 from triaxtrack.deformation import Deformation
+from triaxtrack.layout import TEST_FOLDER
 from triaxtrack.simulate.config import SimulationConfig
 from triaxtrack.simulate.scene import Scene, _surface_points, frame_progress, load_scene
 from triaxtrack.tables import OBSERVATIONS, POINTS, read_table, write_table
@@ -48,7 +49,7 @@ def finish_truth(test_dir: str | Path, observation_parts: Sequence[str | Path]) 
     test_dir = Path(test_dir)
     scene = load_scene(test_dir)
     obs = pd.concat([read_table(p, OBSERVATIONS) for p in observation_parts], ignore_index=True)
-    write_table(obs, test_dir / "truth" / "observations.parquet", OBSERVATIONS)
+    write_table(obs, test_dir / TEST_FOLDER.truth.observations, OBSERVATIONS)
     n_rays = obs.groupby(["frame", "id"]).size()
     rows = []
     for k in range(scene.cfg.frames):
@@ -60,4 +61,4 @@ def finish_truth(test_dir: str | Path, observation_parts: Sequence[str | Path]) 
     key = pd.MultiIndex.from_arrays([pts.frame, pts.id])
     pts["n_rays"] = n_rays.reindex(key).fillna(0).astype(np.int64).to_numpy()
     pts["rms_px"] = 0.0
-    write_table(pts, test_dir / "truth" / "points.parquet", POINTS)
+    write_table(pts, test_dir / TEST_FOLDER.truth.points, POINTS)

@@ -9,6 +9,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from triaxtrack.layout import RESULTS, TRUTH
+
 Q_SIGNIFICANT = 0.1  # q is scored relative to the truth where it exceeds this share of its peak,
 # in kPa elsewhere (a relative error means nothing near q = 0)
 
@@ -19,7 +21,7 @@ def score_stress(
     clock: dict | None,
     truth_clock: dict | None,
     tol,
-    source: str = "stress_strain.parquet",
+    source: str = RESULTS.stress_strain,
 ) -> pd.DataFrame:
     """Rows of ``triaxtrack score`` (:data:`triaxtrack.score.COLUMNS`): ``clock_offset_error``
     (|estimated - true| offset in frames, tolerance ``clock_offset_frames``; from clock.json and
@@ -36,15 +38,15 @@ def score_stress(
         fps = float(clock.get("fps", np.nan))
         err = abs(float(clock["estimated_offset_s"]) - float(truth_clock["clock_offset_s"])) * fps
         rows.append(
-            _metric("clock_offset_error", "all", err, tol.clock_offset_frames, "frames", "clock.json")
+            _metric("clock_offset_error", "all", err, tol.clock_offset_frames, "frames", RESULTS.clock)
         )
         rows.append(_metric("clock_offset_sigma", "all", float(clock["sigma_s"]) * fps, unit="frames",
-                            source="clock.json"))  # fmt: skip
+                            source=RESULTS.clock))  # fmt: skip
         rows.append(
-            _metric("clock_residual", "all", float(clock["residual_mm"]), unit="mm", source="clock.json")
+            _metric("clock_residual", "all", float(clock["residual_mm"]), unit="mm", source=RESULTS.clock)
         )
         rows.append(_metric("clock_offset_error_sigmas", "all", err / fps / float(clock["sigma_s"]),
-                            unit="sigma", source="clock.json"))  # fmt: skip
+                            unit="sigma", source=RESULTS.clock))  # fmt: skip
     m = truth.merge(stress, on="frame", how="left", suffixes=("_true", ""))
     peak = float(np.nanmax(np.abs(m["q_mean_kpa_true"]))) if len(m) else np.nan
     per_frame = []
@@ -102,10 +104,10 @@ def score_stress_files(results_dir: Path, truth_dir: Path, tol) -> pd.DataFrame:
     ``truth_dir/stress_strain.parquet`` (and ``loadframe.json``)."""
     from triaxtrack.tables import STRESS_STRAIN, STRESS_TRUTH, read_table
 
-    clock, truth_clock = Path(results_dir) / "clock.json", Path(truth_dir) / "loadframe.json"
+    clock, truth_clock = Path(results_dir) / RESULTS.clock, Path(truth_dir) / TRUTH.load_frame
     return score_stress(
-        read_table(Path(results_dir) / "stress_strain.parquet", STRESS_STRAIN),
-        read_table(Path(truth_dir) / "stress_strain.parquet", STRESS_TRUTH),
+        read_table(Path(results_dir) / RESULTS.stress_strain, STRESS_STRAIN),
+        read_table(Path(truth_dir) / TRUTH.stress_strain, STRESS_TRUTH),
         json.loads(clock.read_text()) if clock.exists() else None,
         json.loads(truth_clock.read_text()) if truth_clock.exists() else None,
         tol,
