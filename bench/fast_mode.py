@@ -20,6 +20,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from triaxtrack.layout import RESULTS
+
 
 def job_figures(folder: Path) -> tuple[float, float, float, float, int]:
     """Sum and largest ``s`` (seconds), sum of ``cpu_time`` (seconds), largest ``max_rss`` (MB)
@@ -58,7 +60,7 @@ def main(argv: list[str] | None = None) -> None:
     print(f"fast / every-frame: {fast[0] / every[0]:.3f} of the tracking jobs' wall time (aim <= 0.25), "
           f"{fast[2] / every[2]:.3f} of their CPU time")  # fmt: skip
     dv, de, n = volume_difference(
-        pd.read_parquet(args.every / "volume.parquet"), pd.read_parquet(args.fast / "volume.parquet")
+        pd.read_parquet(args.every / RESULTS.volume), pd.read_parquet(args.fast / RESULTS.volume)
     )
     print(f"volume at the {n} frames both measured: largest difference {dv:.5f} % of V0 (aim <= 0.01 %); "
           f"volumetric strain {de:.2e}")  # fmt: skip

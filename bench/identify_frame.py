@@ -19,27 +19,28 @@ import pandas as pd
 
 from triaxtrack.identify import label_frame
 from triaxtrack.kit import ct_codes, load_kit_design, target_table
+from triaxtrack.layout import TEST_FOLDER
 from triaxtrack.optics import Camera
 from triaxtrack.score import ScoreTolerances, score_identification
 from triaxtrack.testfolder import read_cameras_doc
 
 
 def main(test_dir: Path, frame: int) -> pd.DataFrame:
-    cams = read_cameras_doc(test_dir / "truth/cameras.json")
-    design = load_kit_design(test_dir / "kit")
+    cams = read_cameras_doc(test_dir / TEST_FOLDER.truth.cameras)
+    design = load_kit_design(test_dir / TEST_FOLDER.kit)
     codes = ct_codes(design, target_table(design))
     labels = []
     for name, cj in sorted(cams.items()):
         cam = Camera.from_json(name, {**cj, "R": np.eye(3), "t": np.zeros(3)})
-        with av.open(str(test_dir / f"videos/{name}.mp4")) as c:
+        with av.open(str(test_dir / TEST_FOLDER.video.format(camera=name))) as c:
             img = next(f for i, f in enumerate(c.decode(video=0)) if i == frame).to_ndarray(format="gray")
         labels.append(label_frame(img, cam, design, codes).assign(camera=name, frame=frame))
     lab = pd.concat(labels, ignore_index=True)
     posed = {n: Camera.from_json(n, cj) for n, cj in cams.items()}
     return score_identification(
         lab,
-        pd.read_parquet(test_dir / "truth/observations.parquet"),
-        pd.read_parquet(test_dir / "truth/points.parquet"),
+        pd.read_parquet(test_dir / TEST_FOLDER.truth.observations),
+        pd.read_parquet(test_dir / TEST_FOLDER.truth.points),
         posed,
         target_table(design),
         design,

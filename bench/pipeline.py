@@ -290,6 +290,7 @@ def _load_clip(sim: dict, codecs: tuple) -> tuple[_Clip, dict]:
     from triaxtrack.completion import dot_grid
     from triaxtrack.frames import CameraTiming, frame_map
     from triaxtrack.kit import ct_codes, load_kit_design, target_table
+    from triaxtrack.layout import TEST_FOLDER
     from triaxtrack.optics import read_cameras
     from triaxtrack.track import TrackingConfig
     from triaxtrack.video import probe_video
@@ -307,8 +308,8 @@ def _load_clip(sim: dict, codecs: tuple) -> tuple[_Clip, dict]:
     )
     n = figures["video"]["frames"]
     fmap = frame_map(CameraTiming(camera, cfg.fps), n, n)
-    cam = read_cameras(sim["test"] / "truth" / "cameras.json")[camera]
-    kit = load_kit_design(sim["test"] / "kit")
+    cam = read_cameras(sim["test"] / TEST_FOLDER.truth.cameras)[camera]
+    kit = load_kit_design(sim["test"] / TEST_FOLDER.kit)
     codes = ct_codes(kit, target_table(kit))
     return _Clip(video, videos, camera, fmap, n, cam, kit, codes, TrackingConfig(), dot_grid(kit)), figures
 

@@ -25,17 +25,18 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from triaxtrack.layout import RESULTS
 from triaxtrack.video import keyframe_indices
 
 
 def _keyframes(results: Path) -> set[int]:
-    videos = sorted((results / "simulated" / "videos").glob("*.mp4"))
+    videos = sorted(results.glob(RESULTS.simulated.video.format(camera="*")))
     return set(keyframe_indices(videos[0]).tolist()) if videos else set()
 
 
 def _chunk_starts(results: Path) -> set[int]:
     starts = set()
-    for f in (results / "identify").glob("*/*.parquet"):
+    for f in results.glob(RESULTS.chunk_labels.format(camera="*", chunk="*")):
         frames = pd.read_parquet(f, columns=["frame"])["frame"]
         if len(frames):
             starts.add(int(frames.iloc[0]))
@@ -43,9 +44,9 @@ def _chunk_starts(results: Path) -> set[int]:
 
 
 def series_figures(results: Path) -> dict:
-    truth_dir = results / "simulated" / "truth"
-    v = pd.read_parquet(results / "volume.parquet")
-    t = pd.read_parquet(truth_dir / "volume.parquet")
+    sim_truth = RESULTS.simulated.truth
+    v = pd.read_parquet(results / RESULTS.volume)
+    t = pd.read_parquet(results / sim_truth.volume)
     m = v.merge(t, on="frame", suffixes=("", "_t"))
     v0 = float(m["volume_mm3_t"].iloc[0])
     dv = (m["volume_mm3"] - m["volume_mm3"].iloc[0]) - (m["volume_mm3_t"] - m["volume_mm3_t"].iloc[0])
@@ -70,8 +71,8 @@ def series_figures(results: Path) -> dict:
     ve, s = m["volume_mm3"] - m["volume_mm3_t"], m["volume_sigma_mm3"]
     out["volume_within_2sigma"] = float((np.abs(ve) < 2 * s).mean())
     out["volume_rms_error_over_sigma"] = float(np.sqrt(((ve / s) ** 2).mean()))
-    p = pd.read_parquet(results / "points.parquet")
-    tp = pd.read_parquet(truth_dir / "points.parquet")
+    p = pd.read_parquet(results / RESULTS.points)
+    tp = pd.read_parquet(results / sim_truth.points)
     pm = p.merge(tp, on=["frame", "id"], suffixes=("", "_t"))
     pm = pm[pm["id"] > 1000]
     e = np.sqrt(sum((pm[f"{c}_mm"] - pm[f"{c}_mm_t"]) ** 2 for c in "xyz"))
@@ -87,8 +88,8 @@ def plot(results: Path, path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    v = pd.read_parquet(results / "volume.parquet")
-    t = pd.read_parquet(results / "simulated" / "truth" / "volume.parquet")
+    v = pd.read_parquet(results / RESULTS.volume)
+    t = pd.read_parquet(results / RESULTS.simulated.truth.volume)
     m = v.merge(t, on="frame", suffixes=("", "_t"))
     fig, ax = plt.subplots(2, 2, figsize=(11, 7), sharex=True)
     dv = m["volume_mm3"] - m["volume_mm3"].iloc[0]
