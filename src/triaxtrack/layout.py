@@ -1,8 +1,9 @@
 """Where every file of a test folder and of a results folder lives: each path pattern once.
 
 Three layouts, each a frozen dataclass whose fields are path patterns relative to its folder
-(``test-folder.md``; ``docs/architecture.md``, "Stages"), with Snakemake's wildcards
-(``{camera}``, ``{chunk}``, ``{segment}``, ``{table}``) where a file is one of many:
+(``docs/test-folder.md``, "Layout" and "Results"; ``docs/architecture.md``, "Paths"), with
+Snakemake's wildcards (``{camera}``, ``{chunk}``, ``{segment}``, ``{table}``) where a file is
+one of many:
 
 * :data:`RESULTS` (:class:`ResultsLayout`): a test's results, ``results/<test>/``; its
   ``simulated`` is the simulated test folder the workflow writes there;
@@ -53,7 +54,7 @@ class _Layout:
 
 @dataclass(frozen=True)
 class TruthLayout(_Layout):
-    """A simulated test's ``truth/`` (``test-folder.md``, "Simulated tests")."""
+    """A simulated test's ``truth/``: the simulator's exact answers, which ``triaxtrack score`` reads."""
 
     cameras: str = "cameras.json"
     scene: str = "scene.json"
@@ -70,7 +71,7 @@ TRUTH = TruthLayout()
 
 @dataclass(frozen=True)
 class TestFolderLayout(_Layout):
-    """A test folder (``test-folder.md``): what a recorder writes, or the simulator."""
+    """A test folder (``docs/test-folder.md``, "Layout"): what a recorder writes, or the simulator."""
 
     __test__ = False  # not a pytest test class
 
