@@ -75,10 +75,8 @@ def cluster_sigma(influence: pd.DataFrame, gradient: pd.DataFrame) -> tuple[floa
     ix_mm, iy_mm, iz_mm`` (one per observation used); ``gradient``: rows ``id, gx, gy, gz`` (the
     statistic's derivative by each point's x, y, z; points absent do not enter it). NaN and 0
     when no observation meets the gradient."""
-    g = gradient.set_index("id")[["gx", "gy", "gz"]]
-    inf = influence[influence["id"].isin(g.index)]
-    psi = inf[list(INFLUENCE_COLUMNS)].to_numpy(float)
-    ds = np.einsum("ni,ni->n", psi, g.loc[inf["id"]].to_numpy(float))
+    inf, grad = _meeting(influence, gradient)
+    ds = np.einsum("ni,ni->n", inf[list(INFLUENCE_COLUMNS)].to_numpy(float), grad)
     ok = np.isfinite(ds)
     if not ok.any():
         return float("nan"), 0
@@ -100,11 +98,17 @@ def shared_sigma(shifts: pd.DataFrame, gradient: pd.DataFrame) -> float:
     the error along the images' u, then v axis, at 1 sigma; the two axes independent),
     ``gradient`` as :func:`cluster_sigma`'s. Each axis moves the statistic by ``sum_p g_p . s_p``
     over every point, in full; 0 when no point meets the gradient."""
-    g = gradient.set_index("id")[["gx", "gy", "gz"]]
-    s = shifts[shifts["id"].isin(g.index)]
+    s, grad = _meeting(shifts, gradient)
     if s.empty:
         return 0.0
-    grad = g.loc[s["id"]].to_numpy(float)
     cols = list(CODEC_SHIFT_COLUMNS)
     per_axis = [np.nansum(np.einsum("ni,ni->n", s[cols[a : a + 3]].to_numpy(float), grad)) for a in (0, 3)]
     return float(np.hypot(*per_axis))
+
+
+def _meeting(rows: pd.DataFrame, gradient: pd.DataFrame) -> tuple[pd.DataFrame, np.ndarray]:
+    """The ``rows`` (with an ``id``) whose point the ``gradient`` has, and that gradient per row
+    (n, 3)."""
+    g = gradient.set_index("id")[["gx", "gy", "gz"]]
+    mine = rows[rows["id"].isin(g.index)]
+    return mine, g.loc[mine["id"]].to_numpy(float)

@@ -149,12 +149,10 @@ def volume_gradient(
     area, normal = dot_areas(np.asarray(grid.xyz, float))
     m = np.asarray(grid.measured)
     dots = (area[..., None] * normal)[m]
-    g = [pd.DataFrame({"id": ids[m], "gx": dots[:, 0], "gy": dots[:, 1], "gz": dots[:, 2]})]
-    if cap.source == "coded targets" and len(cap_ids):
-        axis = np.asarray(cap.face_normal, float) * abs(volume_mm3 / cap.height_mm) / cap.n_targets
-        on_cap = np.asarray(cap_ids, np.int64)
-        g.append(pd.DataFrame({"id": on_cap, "gx": axis[0], "gy": axis[1], "gz": axis[2]}))
-    return pd.concat(g, ignore_index=True)
+    g = pd.DataFrame({"id": ids[m], "gx": dots[:, 0], "gy": dots[:, 1], "gz": dots[:, 2]})
+    top = height_gradient(cap, cap_ids)  # dV/dh = V / h, the mean cross-section
+    top[["gx", "gy", "gz"]] *= abs(volume_mm3 / cap.height_mm)
+    return pd.concat([g, top], ignore_index=True) if len(top) else g
 
 
 def height_gradient(cap: TopCap, cap_ids: np.ndarray) -> pd.DataFrame:
@@ -178,13 +176,30 @@ def height_sigma_mm(
     of the cap's rigid fit residual (``rms / sqrt(3 n - 6)``) and the cameras' cluster estimate
     with ``influence`` and the height's ``gradient`` (:func:`height_gradient`), and the codec's part
     with the points' ``shifts``, in quadrature."""
-    independent = cap.rms_mm / np.sqrt(max(3 * cap.n_targets - 6, 1))
-    cameras = float("nan")
+    part, _, _, codec = _measured_parts(_cap_fit_mm(cap), influence, gradient, shifts)
+    return float(np.hypot(part, codec))
+
+
+def _cap_fit_mm(cap: TopCap) -> float:
+    """The top face's height error from its rigid fit's residual, ``rms / sqrt(3 n - 6)`` (mm)."""
+    return float(cap.rms_mm / np.sqrt(max(3 * cap.n_targets - 6, 1)))
+
+
+def _measured_parts(
+    independent: float,
+    influence: pd.DataFrame | None,
+    gradient: pd.DataFrame | None,
+    shifts: pd.DataFrame | None,
+) -> tuple[float, float, int, float]:
+    """A statistic's measured part -- the larger of its ``independent`` model and the cameras'
+    cluster estimate (with ``influence`` and its ``gradient``) -- the cluster estimate (NaN
+    without), the cameras in it, and the codec's part (with the points' ``shifts``; else 0)."""
+    cameras, n_cameras = float("nan"), 0
     if influence is not None and gradient is not None and len(influence) and len(gradient):
-        cameras = cluster_sigma(influence, gradient)[0]
+        cameras, n_cameras = cluster_sigma(influence, gradient)
     part = max(independent, cameras) if np.isfinite(cameras) else independent
     codec = shared_sigma(shifts, gradient) if shifts is not None and gradient is not None else 0.0
-    return float(np.hypot(part, codec))
+    return part, cameras, n_cameras, codec
 
 
 def volume_uncertainty(
@@ -212,13 +227,8 @@ def volume_uncertainty(
         sig[given] = np.asarray(grid.sigma_mm)[given] / np.sqrt(3)
     measured = float(np.sqrt(np.sum((area[m] * sig[m]) ** 2)))
     fill, n_samples = fill_sigma_mm3(grid, ends)
-    dof = max(3 * cap.n_targets - 6, 1)
-    cap_part = abs(volume_mm3 / cap.height_mm) * cap.rms_mm / np.sqrt(dof)
+    cap_part = abs(volume_mm3 / cap.height_mm) * _cap_fit_mm(cap)
     independent = float(np.hypot(measured, cap_part))
-    cameras, n_cameras = float("nan"), 0
-    if influence is not None and gradient is not None and len(influence):
-        cameras, n_cameras = cluster_sigma(influence, gradient)
-    part = max(independent, cameras) if np.isfinite(cameras) else independent
-    codec = shared_sigma(shifts, gradient) if shifts is not None and gradient is not None else 0.0
+    part, cameras, n_cameras, codec = _measured_parts(independent, influence, gradient, shifts)
     total = float(np.sqrt(part**2 + fill**2 + codec**2))
     return VolumeUncertainty(total, measured, fill, float(cap_part), n_samples, cameras, n_cameras, codec)
