@@ -57,3 +57,24 @@ def test_touching_blurred_dots_are_cut_apart_near_their_centres():
     d = np.linalg.norm(uv[None, :, :] - centres[:, None, :], axis=2).min(axis=1)
     assert (d < 0.5).mean() >= 0.95  # found, one blob each, within half a pixel
     assert blobs.split.any()
+
+
+def test_a_long_column_of_touching_dots_is_cut_however_long_but_a_dark_area_is_not():
+    # most dots (radius 2.2 px) stand apart, 12 px each way; two columns of 30 dots 5 px apart touch once
+    # blurred: each is one component far larger than SPLIT_MAX_AREA_FACTOR x the median dot, but
+    # one dot thick. The rim of a dark square (a silhouette's background) is not cut.
+    rng = np.random.default_rng(5)
+    apart = [(20 + 12 * i + rng.uniform(), 14 + 12 * j + rng.uniform()) for i in range(40) for j in range(14)]
+    jitter = rng.uniform(0, 0.3, (60, 2))
+    column = [(520 + 14 * (k // 30) + jitter[k, 0], 14 + 5 * (k % 30) + jitter[k, 1]) for k in range(60)]
+    centres = np.array(apart + column)
+    big = np.array([(700 + 30 * i + 0.4, 100.3) for i in range(5)])
+    img = _dots(np.r_[centres, big], 2.2, shape=(180, 1280), blur=1.0, noise=3.0)
+    img = np.minimum(img, _dots(big, 5, shape=(180, 1280), blur=1.0))
+    img[40:120, 900:1000] = INK
+    blobs = detect_blobs(img)
+    uv = blobs[["u_px", "v_px"]].to_numpy()
+    d = np.linalg.norm(uv[None, :, :] - np.array(column)[:, None, :], axis=2).min(axis=1)
+    assert (d < 0.5).mean() >= 0.9  # each touching dot found on its own, within half a pixel
+    in_square = (uv[:, 0] > 895) & (uv[:, 0] < 1005) & (uv[:, 1] > 35) & (uv[:, 1] < 125)
+    assert in_square.any() and not blobs.split.to_numpy()[in_square].any()

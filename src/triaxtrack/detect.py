@@ -137,9 +137,13 @@ SMOOTH_PER_BLUR = 0.7
 # compressed footage the measured noise reads low (noise_sigma) and the fraction governs.
 SPLIT_NOISE_K = 4.0
 SPLIT_DIP_FRACTION = 0.1
-# only components up to this many times the median blob's area are split: larger ones are edges,
-# labels and bands, not groups of dots
+# Which components are split: those up to this many times the median blob's area, and, however
+# large, those no thicker than SPLIT_MAX_THICKNESS x the median blob's thickness (the largest
+# distance from a pixel to the component's edge). Rows of dots whose blurred images touch stay one
+# dot thick however long they grow (a membrane column compressed to a 5 px row pitch at 720p at 10 %
+# strain is one component hundreds of dots long); edges, labels and bands are thicker.
 SPLIT_MAX_AREA_FACTOR = 8.0
+SPLIT_MAX_THICKNESS = 1.5
 
 
 def _split_touching(cs: np.ndarray, components: np.ndarray, area: np.ndarray, sigma: float,
@@ -151,11 +155,14 @@ def _split_touching(cs: np.ndarray, components: np.ndarray, area: np.ndarray, si
     from skimage.segmentation import watershed
 
     n = len(area)
-    sized = area[1:][area[1:] >= p.min_area_px]
-    if len(sized) == 0:
+    sized = area >= p.min_area_px
+    sized[0] = False
+    if not sized.any():
         return components, np.zeros(n, bool)
-    limit = SPLIT_MAX_AREA_FACTOR * float(np.median(sized))
-    cand = (area >= 2 * p.min_area_px) & (area <= limit)
+    small = sized & (area <= SPLIT_MAX_AREA_FACTOR * float(np.median(area[sized])))
+    thick = _thickness(components, n)
+    thin = thick <= SPLIT_MAX_THICKNESS * float(np.median(thick[small]))
+    cand = (area >= 2 * p.min_area_px) & (small | thin)
     cand[0] = False
     if not cand.any():
         return components, np.zeros(n, bool)
@@ -193,6 +200,17 @@ def _split_touching(cs: np.ndarray, components: np.ndarray, area: np.ndarray, si
     window[cut] = relabel[pieces[cut]]
     piece = np.r_[np.zeros(n, bool), np.ones(len(kept), bool)]
     return out, piece
+
+
+def _thickness(components: np.ndarray, n: int) -> np.ndarray:
+    """Per label of ``components`` (``n`` labels), its largest distance from a pixel to the label's
+    edge (L2, pixels; 0 for label 0)."""
+    from scipy import ndimage
+
+    dist = cv2.distanceTransform((components > 0).astype(np.uint8), cv2.DIST_L2, 3)
+    thick = np.asarray(ndimage.maximum(dist, components, np.arange(n)), np.float64)
+    thick[0] = 0.0
+    return thick
 
 
 def detect_blobs(gray: np.ndarray, params: DetectParams | None = None) -> pd.DataFrame:
