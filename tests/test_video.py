@@ -294,3 +294,51 @@ def test_sparse_frames_are_the_decoded_frames_and_cost_fewer_decodes(
     assert list(SparseFrames(path, [])) == []
     with pytest.raises(ValueError, match="no frame 25"):
         list(SparseFrames(path, [3, 25]))
+
+
+def test_decode_ahead_keeps_order_raises_where_it_stopped_and_stops_its_source_when_closed():
+    from triaxtrack.video.read import decode_ahead
+
+    assert list(decode_ahead(iter(range(50)), 2)) == list(range(50))
+    assert list(decode_ahead(iter(range(5)), 0)) == list(range(5))
+
+    def failing():
+        yield 1
+        yield 2
+        raise ValueError("error decoding some.mp4")
+
+    got = []
+    with pytest.raises(ValueError, match="some.mp4"):
+        for item in decode_ahead(failing(), 2):
+            got.append(item)
+    assert got == [1, 2]
+
+    produced, closed = [], []
+
+    def source():
+        try:
+            for k in range(1000):
+                produced.append(k)
+                yield k
+        finally:
+            closed.append(True)
+
+    ahead = decode_ahead(source(), 2)
+    assert next(ahead) == 0
+    ahead.close()
+    assert closed == [True] and len(produced) <= 4  # at most `depth` items beyond the one taken
+
+
+def test_iter_frames_decodes_ahead_and_stops_when_left(tmp_path: Path, originals: list[np.ndarray]):
+    import threading
+
+    path = tmp_path / "ahead.mp4"
+    with VideoWriter(path, W, H, FPS, gop=8) as w:
+        for img in originals:
+            w.write(img)
+    frames = iter_frames(path)
+    k, img = next(frames)
+    assert k == 0
+    assert_matches(0, img, originals)
+    frames.close()
+    assert not any(t.name == "decode-ahead" for t in threading.enumerate())
