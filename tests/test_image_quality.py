@@ -78,3 +78,25 @@ def test_a_long_column_of_touching_dots_is_cut_however_long_but_a_dark_area_is_n
     assert (d < 0.5).mean() >= 0.9  # each touching dot found on its own, within half a pixel
     in_square = (uv[:, 0] > 895) & (uv[:, 0] < 1005) & (uv[:, 1] > 35) & (uv[:, 1] < 125)
     assert in_square.any() and not blobs.split.to_numpy()[in_square].any()
+
+
+def test_an_under_exposed_frame_is_detected_as_the_same_frame_exposed_normally():
+    from triaxtrack.detect import DetectParams, dot_mask, exposure_params
+
+    rng = np.random.default_rng(8)
+    grid = [(20 + 14 * i, 14 + 14 * j) for i in range(60) for j in range(8)]
+    centres = np.array(grid) + rng.uniform(0, 1, (len(grid), 2))
+    img = _dots(centres, 2.5, shape=(130, 1280), blur=0.6, noise=2.0)
+    assert exposure_params(img) == DetectParams()  # a normal exposure: unchanged
+    noise = np.random.default_rng(9).normal(0, 1.0, img.shape)
+    dim = np.round(img * 0.15 + noise).clip(0, 255).astype(np.uint8)  # white 30, the dots 24 darker
+
+    def found(frame, params):
+        blobs = detect_blobs(frame, params)
+        uv = blobs[["u_px", "v_px"]].to_numpy()[dot_mask(blobs, params)]
+        d = np.linalg.norm(uv[None, :, :] - centres[:, None, :], axis=2)
+        return (d.min(axis=1) < 0.5).mean(), len(uv)
+
+    assert found(img, None) == (1.0, len(centres))
+    assert found(dim, None)[0] < 0.5  # contrast 24 grey levels: under the fixed floor of 25
+    assert found(dim, exposure_params(dim)) == (1.0, len(centres))  # every dot, and nothing else

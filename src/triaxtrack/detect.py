@@ -23,7 +23,7 @@ says ``undist`` (ideal pinhole pixels of the same camera matrix, see :func:`undi
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import cv2
 import numpy as np
@@ -43,7 +43,8 @@ class DetectParams:
 
     background_px: int = 0
     ink_fraction: float = 0.35
-    min_contrast: float = 25.0  # grey levels: fainter blobs are noise
+    min_contrast: float = 25.0  # grey levels at a normal exposure: fainter blobs are noise (see
+    # exposure_params: scaled with the frame's white level where that is below NORMAL_WHITE)
     min_area_px: int = 4
     max_area_px: int = 40000
     min_roundness: float = 0.2
@@ -65,6 +66,25 @@ BLOB_COLUMNS = [
     "contrast", "background", "cov_uu", "cov_uv", "cov_vv", "beside_edge", "at_border",
     "split", "blur",
 ]  # fmt: skip
+
+
+# A frame's white level (the 99th percentile of its local background: the membrane, labels and
+# bands) at a normal exposure or brighter. An under-exposed frame (a dim lab, a camera closed
+# down) has every contrast scaled down with its white: the grey-level floors (min_contrast) are
+# scaled with it, so that the same scene is detected the same at any exposure.
+NORMAL_WHITE = 160.0
+
+
+def exposure_params(gray: np.ndarray, params: DetectParams | None = None) -> DetectParams:
+    """``params`` (default :class:`DetectParams`) for this frame's exposure: ``min_contrast`` times
+    the frame's white level over :data:`NORMAL_WHITE` where that is below 1 (unchanged at a
+    normal exposure)."""
+    p = params or DetectParams()
+    g = np.asarray(gray)
+    step = max(1, g.shape[1] // 640)  # a sample is enough for a percentile
+    white = float(np.percentile(background(g, background_size_px(g.shape[1], p))[::step, ::step], 99))
+    scale = min(1.0, white / NORMAL_WHITE)
+    return p if scale >= 1.0 else replace(p, min_contrast=p.min_contrast * scale)
 
 
 def background_size_px(width: int, params: DetectParams | None = None) -> int:

@@ -296,10 +296,12 @@ def undistorted_pixels(camera: Camera) -> Callable[[np.ndarray], np.ndarray]:
 def label_frame(gray: np.ndarray, camera, design: KitDesign, codes: dict[int, int], detect_params=None,
                 identify_params: IdentifyParams | None = None) -> pd.DataFrame:  # fmt: skip
     """Detect and identify every target in one grey frame of a calibrated ``camera``
-    (:class:`triaxtrack.optics.Camera`, intrinsics used). Columns ``LABEL_COLUMNS``."""
+    (:class:`triaxtrack.optics.Camera`, intrinsics used), with ``detect_params`` scaled to the
+    frame's exposure (:func:`~triaxtrack.detect.exposure_params`). Columns ``LABEL_COLUMNS``."""
     from triaxtrack.coded_targets import decode_coded_targets
-    from triaxtrack.detect import detect_blobs, dot_mask
+    from triaxtrack.detect import detect_blobs, dot_mask, exposure_params
 
+    detect_params = exposure_params(gray, detect_params)
     blobs = detect_blobs(gray, detect_params)
     cts = decode_coded_targets(gray, blobs, codes, design.coded_target, detect_params)
     return identify(blobs, cts, design, undistorted_pixels(camera), dot_mask(blobs, detect_params),
