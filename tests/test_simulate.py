@@ -228,6 +228,8 @@ def test_nvr_preset_and_explicit_keys():
         ({"light_gradient": 1.5}, "light_gradient"),
         ({"vignetting": -0.1}, "vignetting"),
         ({"exposure_drift": "x"}, "exposure_drift"),
+        ({"exposure": 0}, "exposure"),
+        ({"exposure": 3.0}, "exposure"),
         ({"timestamp_overlay": "yes"}, "timestamp_overlay"),
         ({"camera_tilt_deg": -2}, "camera_tilt_deg"),
         ({"occluder_z_mm": [10]}, "occluder_z_mm"),
@@ -377,3 +379,10 @@ def test_gop_grid_whatever_the_chunk_size(kit_dir, tmp_path, chunk_size):
     n = concat_videos(segments, tmp_path / "cam01.mp4")
     assert n == 14
     assert keyframe_indices(tmp_path / "cam01.mp4").tolist() == [0, 4, 8, 12]
+
+
+def test_exposure_scales_the_picture_before_the_noise(small_test):
+    _, lit, _ = _render(small_test, "cam03", noise_sigma=0.0, vignetting=0.0)
+    _, dim, _ = _render(small_test, "cam03", noise_sigma=0.0, vignetting=0.0, exposure=0.3)
+    bright = lit > 100
+    assert np.abs(dim[bright] - 0.3 * lit[bright]).max() <= 1.0  # rounding to grey levels only

@@ -42,6 +42,7 @@ class SimulationConfig:
     vignetting: float = VIGNETTING  # light fall-off at the image corners (relative)
     light_gradient: float = 0.0  # lamp on one side: the dark side this much darker (relative)
     exposure_drift: float = 0.0  # largest relative exposure-gain change over the test
+    exposure: float = 1.0  # the cameras' exposure gain: 1 as lit, 0.3 an under-exposed (dim) picture
     timestamp_overlay: bool = False  # burn a "2026-11-25 14:03:27" date/time into the top-left corner
     camera_tilt_deg: float = 0.0  # each camera's pitch drawn uniformly in +- this, degrees
     occluder_z_mm: tuple[float, float] | None = None  # (z0, z1): a dark band hides the membrane there
@@ -122,6 +123,9 @@ PRESETS: dict[str, dict] = {
 }
 
 
+MAX_EXPOSURE = 2.0  # simulation.exposure: brighter saturates the white surfaces
+
+
 def apply_preset(d: dict) -> dict:
     """A copy of settings ``d`` with its ``preset`` (if any) expanded: the preset's keys
     (``PRESETS``), then ``d``'s own keys over them; the ``preset`` key itself is removed."""
@@ -140,6 +144,9 @@ def _check_effects(cfg: SimulationConfig) -> None:
         v = getattr(cfg, key)
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0 <= v < 1:
             raise ValueError(f"{key} must be a number in [0, 1), not {v!r}")
+    e = cfg.exposure
+    if isinstance(e, bool) or not isinstance(e, (int, float)) or not 0 < e <= MAX_EXPOSURE:
+        raise ValueError(f"exposure must be a number in (0, {MAX_EXPOSURE}], not {e!r}")
     if not isinstance(cfg.timestamp_overlay, bool):
         raise ValueError(f"timestamp_overlay must be true or false, not {cfg.timestamp_overlay!r}")
     t = cfg.camera_tilt_deg

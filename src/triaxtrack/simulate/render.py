@@ -87,6 +87,8 @@ class CameraRenderer:
         if cfg.light_gradient > 0:
             direction = footage.gradient_direction(cfg.seed, camera)
             self._light = self._light * footage.gradient_field(w, h, cfg.light_gradient, direction)
+        if cfg.exposure != 1:
+            self._light = self._light * np.float32(cfg.exposure)
         s = scene.deformation
         nt, nz = MEMBRANE_QUADS
         th, zz = np.meshgrid(2 * np.pi * np.arange(nt + 1) / nt, np.linspace(0, s.height, nz + 1))
@@ -311,7 +313,7 @@ class CameraRenderer:
 
     def _camera_effects(self, img: np.ndarray, frame: int) -> np.ndarray:
         """Camera and recorder effects, in the order they happen (:mod:`triaxtrack.footage`):
-        light (vignetting, light gradient, exposure drift), optional blur, the timestamp
+        light (vignetting, light gradient, exposure and its drift), optional blur, the timestamp
         overlay, sensor noise (seeded per camera and frame), rounding to 8 bits."""
         cfg, cam = self.scene.cfg, self.cam
         img = img * self._light
