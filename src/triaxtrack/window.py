@@ -426,7 +426,7 @@ def _windows(shape: tuple, uv: np.ndarray, rad: np.ndarray) -> tuple[np.ndarray,
     return half, centre, code
 
 
-@numba.njit(cache=True, nogil=True)  # without Python's lock: decoding goes on meanwhile
+@numba.njit(cache=True)
 def _measure_all(g: np.ndarray, uv: np.ndarray, rad: np.ndarray, ink_fraction: float,
                  disc_margin: float) -> tuple:  # fmt: skip
     """:func:`measure_windows` (the reasons as codes: :data:`REASON_CODES`): the windows' levels

@@ -3,12 +3,10 @@ before the first) or one (:func:`read_frame`)."""
 
 from __future__ import annotations
 
-import queue
-import threading
 from collections.abc import Iterator
 from fractions import Fraction
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import Any
 
 import av
 import numpy as np
@@ -29,9 +27,7 @@ def iter_frames(path: PathLike, start: int = 0, stop: int | None = None) -> Iter
     ``frame`` is uint8 of shape ``(H, W)``; ``k`` is the exact frame index derived from the
     pts (frame ``k`` is at ``k / fps`` s). For ``start > 0`` the reader seeks to the keyframe
     at or before frame ``start`` and decodes forward, dropping earlier frames. ``stop=None``
-    reads to the end. The frames are decoded :data:`DECODE_AHEAD` frames ahead of the caller, in
-    a thread of their own (:func:`decode_ahead`); at most that many more are held (plus the
-    decoder's buffers).
+    reads to the end. Only one frame is held at a time (plus decoder buffers).
 
     The file's existence and the arguments are checked immediately (FileNotFoundError /
     ValueError); other read errors surface on iteration as ValueError naming the file.
@@ -42,64 +38,7 @@ def iter_frames(path: PathLike, start: int = 0, stop: int | None = None) -> Iter
         raise ValueError(f"stop must be >= 0 or None, got {stop}")
     if not Path(path).is_file():
         raise FileNotFoundError(f"video file not found: {path}")
-    return decode_ahead(_iter_frames(path, int(start), None if stop is None else int(stop)), DECODE_AHEAD)
-
-
-# Frames decoded ahead of the one being processed, in a thread of their own: the decoder runs in C
-# without Python's lock (PyAV releases it), and so do the tracker's compiled kernels, so decoding
-# the next frames overlaps measuring this one. Two frames keep both of a lab PC's cores busy and
-# hold 2 x 8 MB at 4K.
-DECODE_AHEAD = 2
-T = TypeVar("T")
-
-
-def decode_ahead(items: Iterator[T], depth: int) -> Iterator[T]:
-    """The items of ``items``, in order, produced in a background thread up to ``depth`` items
-    before they are taken (``depth`` 0: in the caller's thread, one at a time). An exception
-    raised while producing them is raised here, at the item it stopped; closing this iterator
-    early stops and closes ``items``."""
-    if depth <= 0:
-        yield from items
-        return
-    ready: queue.Queue = queue.Queue(maxsize=depth)
-    stop = threading.Event()
-
-    def put(entry: tuple) -> bool:
-        while not stop.is_set():
-            try:
-                ready.put(entry, timeout=0.1)
-                return True
-            except queue.Full:
-                continue
-        return False
-
-    def produce() -> None:
-        try:
-            for item in items:
-                if not put((True, item)):
-                    return
-            put((False, None))
-        except BaseException as exc:  # handed to the consumer, raised there
-            put((False, exc))
-        finally:
-            close = getattr(items, "close", None)
-            if close is not None:
-                close()
-
-    worker = threading.Thread(target=produce, name="decode-ahead", daemon=True)
-    worker.start()
-    try:
-        while True:
-            more, value = ready.get()
-            if more:
-                yield value
-            elif value is None:
-                return
-            else:
-                raise value
-    finally:
-        stop.set()
-        worker.join()
+    return _iter_frames(path, int(start), None if stop is None else int(stop))
 
 
 _LUMA_FIRST = ("yuv420p", "yuvj420p", "nv12", "yuv422p", "yuvj422p", "yuv444p", "yuvj444p")  # 8-bit
