@@ -9,8 +9,7 @@ says ``undist`` (ideal pinhole pixels of the same camera matrix, see :func:`undi
   morphological closing, which removes every dark feature smaller than ``background_px``), and
   a pixel is ink when it is darker than that background by ``ink_fraction`` of it.
 * Centroids are contrast-weighted (``background - grey``) over the blob grown by one pixel, so
-  partly covered edge pixels count (on soft footage, a pixel where two blobs meet counts for
-  neither). A dot of a stripe that runs along a dark edge can be
+  partly covered edge pixels count. A dot of a stripe that runs along a dark edge can be
   re-centred against the background measured in the stripe's gaps, which holds the edge's
   blurred fringe too (:func:`gap_background_centroids`).
 * ``contrast`` is the blob's darkest depth below the background; ``background`` the local white
@@ -242,8 +241,7 @@ def detect_blobs(gray: np.ndarray, params: DetectParams | None = None) -> pd.Dat
     of the dots' median minor axis) the frame is detected again with the ink mask thresholded on the
     contrast smoothed by ``SMOOTH_PER_BLUR`` x the blur (noise-proof at little cost in
     resolution: the image is already that soft), and blobs holding several significant maxima
-    (touching dots) cut apart at the valleys between them (``split`` True), each piece re-measured
-    in a disc as the tracker measures a dot where the disc holds it whole. Centroids and masses
+    (touching dots) cut apart at the valleys between them (``split`` True). Centroids and masses
     are always weighted by the raw contrast. No filtering by shape here beyond
     ``min_area_px``/``max_area_px``; see :func:`dot_mask`.
     """
@@ -260,13 +258,11 @@ def detect_blobs(gray: np.ndarray, params: DetectParams | None = None) -> pd.Dat
 
 
 # A piece cut from touching dots is weighted over the pixels the watershed gave it, which cut its
-# blurred image short on the side of each neighbour unevenly. Re-measured as the tracker measures
+# blurred image short on the side of each neighbour unevenly: on a 720p test at 10 % strain the
+# pieces were 0.21 px from their true centres at the median. Re-measured as the tracker measures
 # every dot (triaxtrack.window: a disc of the piece's semi-major axis plus this margin, re-centred
-# on its ink), it is measured as it will be tracked: on a 720p test at 10 % strain, pieces the
-# disc holds whole went from 0.21 to 0.085 px off their true centres at the median, and the
-# tracker agreed with them at the chunk's first frame. A piece whose ink runs on beyond the disc
-# keeps its watershed centroid (with the fair growth of _grown_by_one, the membrane labels of that
-# frame were 0.083 px off at the median, 0.166 px at the 90th percentile, from 0.114 and 0.281).
+# on its ink), those the disc holds whole were 0.085 px off, and the tracker agrees with them at a
+# chunk's first frame. A piece whose ink runs on beyond the disc keeps its watershed centroid.
 PIECE_DISC_MARGIN_PX = 1.0  # as TrackingConfig.disc_margin_px
 
 
