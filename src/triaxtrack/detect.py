@@ -253,37 +253,8 @@ def detect_blobs(gray: np.ndarray, params: DetectParams | None = None) -> pd.Dat
     blur = blur_sigma(g, blobs)
     dots = dot_mask(blobs, p)
     if dots.any() and blur >= BLUR_SMOOTH_REL * float(np.median(blobs.minor_px.to_numpy()[dots])):
-        blobs = _recentred_pieces(g, _detect(g, p, SMOOTH_PER_BLUR * blur, noise_sigma(g)), p)
+        blobs = _detect(g, p, SMOOTH_PER_BLUR * blur, noise_sigma(g))
     return blobs.assign(blur=blur)
-
-
-# A piece cut from touching dots is weighted over the pixels the watershed gave it, which cut its
-# blurred image short on the side of each neighbour unevenly: on a 720p test at 10 % strain the
-# pieces were 0.21 px from their true centres at the median. Re-measured as the tracker measures
-# every dot (triaxtrack.window: a disc of the piece's semi-major axis plus this margin, re-centred
-# on its ink), those the disc holds whole were 0.085 px off, and the tracker agrees with them at a
-# chunk's first frame. A piece whose ink runs on beyond the disc keeps its watershed centroid.
-PIECE_DISC_MARGIN_PX = 1.0  # as TrackingConfig.disc_margin_px
-
-
-def _recentred_pieces(g: np.ndarray, blobs: pd.DataFrame, p: DetectParams) -> pd.DataFrame:
-    """``blobs`` with the centroids of the pieces of cut components (``split``) re-measured by
-    :func:`triaxtrack.window.measure_windows` where it finds them whole (a copy)."""
-    from triaxtrack.window import measure_windows
-
-    piece = blobs["split"].to_numpy(bool)
-    if not piece.any():
-        return blobs
-    uv = blobs[["u_px", "v_px"]].to_numpy(np.float64)[piece]
-    area = np.maximum(blobs["area_px"].to_numpy(np.float64)[piece], 1.0)  # as the tracker's discs
-    radius = np.sqrt(area / (np.pi * np.clip(blobs["roundness"].to_numpy(np.float64)[piece], 0.2, 1.0)))
-    found = measure_windows(np.ascontiguousarray(g), uv, radius + PIECE_DISC_MARGIN_PX, p.ink_fraction,
-                            PIECE_DISC_MARGIN_PX)  # fmt: skip
-    whole = found.code == 0
-    new = np.where(whole[:, None], found.uv, uv)
-    out = blobs.copy()
-    out.loc[piece, "u_px"], out.loc[piece, "v_px"] = new[:, 0], new[:, 1]
-    return out
 
 
 def _detect(g: np.ndarray, p: DetectParams, smooth_px: float, sigma: float = 0.0) -> pd.DataFrame:
@@ -309,7 +280,8 @@ def _detect(g: np.ndarray, p: DetectParams, smooth_px: float, sigma: float = 0.0
     labels = lut[components]
     geo = _label_sums(components, n)
     # contrast-weighted centroid over the blob grown by one pixel (edge pixels partly covered)
-    grown = _grown_by_one(labels, fair=smooth_px > 0)
+    grown = cv2.dilate(labels.astype(np.float32), np.ones((3, 3), np.uint8)).astype(np.int32)
+    grown = np.where(labels > 0, labels, grown)
     # a blob whose grown pixels reach the image border is cut by it: its centroid is biased
     rim = np.concatenate([grown[0], grown[-1], grown[:, 0], grown[:, -1]])
     at_border = np.zeros(n, bool)
@@ -341,21 +313,6 @@ def _detect(g: np.ndarray, p: DetectParams, smooth_px: float, sigma: float = 0.0
         "at_border": at_border[idx],
         "split": piece[idx],
     })  # fmt: skip
-
-
-def _grown_by_one(labels: np.ndarray, fair: bool) -> np.ndarray:
-    """The label image with every unlabelled pixel next to a label (8-neighbour) given it. Where
-    two labels meet one pixel, it goes to the larger one; with ``fair``, to neither: the pieces of
-    touching dots cut apart meet at many such pixels, and given all to one side they moved each
-    piece's centroid by 0.3 px towards the next (a column of dots 5 px apart, blur 1 px)."""
-    kernel = np.ones((3, 3), np.uint8)
-    lab = labels.astype(np.float32)  # exact for labels below 2^24
-    grown = cv2.dilate(lab, kernel)
-    if fair:
-        big = np.float32(2**24)
-        low = cv2.erode(np.where(labels > 0, lab, big), kernel)
-        grown = np.where(low == grown, grown, 0)
-    return np.where(labels > 0, labels, grown.astype(np.int32))
 
 
 def _ellipse(sums: dict[str, np.ndarray], idx: np.ndarray) -> tuple[np.ndarray, ...]:
