@@ -36,6 +36,8 @@ from triaxtrack.identify import (
 from triaxtrack.identify.anchors import MAX_PITCH_CHANGE, ROW_PITCH_RANGE, _anchor_offsets, _MembraneView
 from triaxtrack.identify.cell import _over_chain_neighbours, _row_pitch_px, _straight_chains
 from triaxtrack.identify.coded import _ct_stripes, _plausible_cts
+from triaxtrack.identify.membrane import _label_beside_band
+from triaxtrack.identify.merged import _recentred_beside_band
 from triaxtrack.identify.state import UNLABELLED
 from triaxtrack.kit import coded_target_polygons, ct_codes, load_kit_design, target_table
 from triaxtrack.kit_design import CodedTargetDesign, MembraneDesign
@@ -649,3 +651,60 @@ def test_a_close_low_camera_labels_the_membrane_without_the_top_pedestal(kit_dir
         seen = obs[(obs.camera == name) & (obs.frame == 0) & obs.id.isin(membrane)].id
         share = seen.isin(labels.id[labels.id > 0]).mean()
         assert share >= 0.95, (name, share)
+
+
+def test_membrane_dots_beside_a_bright_band_are_recentred_against_the_gaps(kit):
+    """A membrane column beside a longitudinal stripe's white band (brighter than the membrane):
+    dots of radius 7 px, 20 px apart, their edges 1.5 px from the band's, blurred by 1 px, noise
+    3 grey levels. The band's fringe lies on one side of each dot: its blob centroid leans by
+    more than 0.1 px. Re-centred against the background of the gaps along its column, where the
+    fringe lies as well, every dot with both column neighbours labelled is within 0.1 px (0.07
+    at most here); the column's end dots (a neighbour missing) are left out."""
+    design = kit[0]
+    m = design.membrane
+    ss, radius, spacing = 8, 7.0, 20.0  # supersampling; pixels
+    h, w = 240, 74
+    yy, xx = (np.mgrid[0 : h * ss, 0 : w * ss] + 0.5) / ss - 0.5  # pixel centres at integers
+    img = np.where(xx > 35.0 + radius + 1.5, 215.0, 165.0)
+    truth = np.array([(35.0 + 0.04 * k, 20.3 + spacing * k) for k in range(10)])
+    for u, v in truth:
+        img[(xx - u) ** 2 + (yy - v) ** 2 <= radius**2] = 25.0
+    img = cv2.GaussianBlur(img.reshape(h, ss, w, ss).mean(axis=(1, 3)), (0, 0), 1.0)
+    img = np.clip(img + np.random.default_rng(3).normal(0, 3.0, img.shape), 0, 255).astype(np.uint8)
+    blobs = detect_blobs(img, DetectParams(background_px=48))
+    dots = blobs[blobs.area_px > 50].sort_values("v_px").reset_index(drop=True)
+    assert len(dots) == len(truth)
+    uv = dots[["u_px", "v_px"]].to_numpy()
+    assert np.hypot(*(uv - truth)[1:-1].T).max() > 0.1
+    ids = m.first_id + (np.arange(10) + 20) * m.columns + 5  # rows 21-30 of column 6
+    f = _Frame(
+        blobs=dots, pos=uv.copy(), ids=ids.astype(np.int64), group=np.full(10, "m", object),
+        quality=np.ones(10), reason=np.full(10, "", object),
+    )  # fmt: skip
+    at, new = _recentred_beside_band(f, uv, np.ones(10, bool), img, m)
+    assert list(at) == list(range(1, 9))
+    assert np.hypot(*(new - truth[1:-1]).T).max() < 0.1
+
+
+@pytest.mark.parametrize("across_px, taken", [(10.0, True), (4.5, False)])
+def test_membrane_dots_beside_a_band_are_labelled_from_the_grid_where_resolved(kit, across_px, taken):
+    """Membrane columns 3-7 (rows 10-19) labelled and, beyond them, column 8 beside a band (kept
+    out of the regions' growth): the grid is extended onto column 8 alone, its IDs by Eq. 4,
+    where its dots stand clear of their row neighbours (10 px apart, twice the 2.5 px reach of
+    their image and blur). Where the columns crowd to 4.5 px (towards a silhouette) none is taken.
+    A free dot not beside the band (column 9) is never taken."""
+    m = kit[0].membrane
+    nodes = [(r, c) for r in range(10, 20) for c in range(3, 10)]
+    pos = np.array([(100.0 + across_px * c, 50.0 + 10.0 * r) for r, c in nodes])
+    ids = np.array([m.first_id + r * m.columns + c if c < 8 else UNLABELLED for r, c in nodes], np.int64)
+    blobs = pd.DataFrame({"u_px": pos[:, 0], "v_px": pos[:, 1], "area_px": 20.0, "background": 200.0,
+                          "roundness": 1.0})  # fmt: skip
+    empty = np.full(len(pos), "", object)
+    f = _Frame(blobs, pos, ids.copy(), empty.copy(), np.zeros(len(pos)), empty.copy())
+    beside = np.array([c == 8 for _, c in nodes])
+    pool = _Pool(pos, np.zeros(len(pos), bool), blobs)
+    _label_beside_band(f, pool, beside, np.full(len(pos), 2.5), m, IdentifyParams())
+    col8 = [m.first_id + r * m.columns + 8 for r, c in nodes if c == 8]
+    assert list(f.ids[beside]) == (col8 if taken else [UNLABELLED] * len(col8))
+    assert (f.ids[[c == 9 for _, c in nodes]] == UNLABELLED).all()
+    assert (f.ids[~beside] == ids[~beside]).all()

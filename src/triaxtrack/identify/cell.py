@@ -141,13 +141,21 @@ def _band_zone(f: _Frame, order: np.ndarray, pad: np.ndarray | float, design: Ki
     return _near_polyline(f.pos, line, half * np.maximum(across[:-1], across[1:]), pad)
 
 
-def _hide_behind_band(f: _Frame, pool: _Pool, order: np.ndarray, pad: np.ndarray, design: KitDesign) -> None:
+def _hide_behind_band(
+    f: _Frame, pool: _Pool, order: np.ndarray, image: np.ndarray, pad: np.ndarray, design: KitDesign
+) -> np.ndarray:
     """Take out of the pool (reason given) the free dots whose image reaches the white band of
-    a longitudinal stripe whose dots, in order along it, are ``order`` (blob indices): within
-    half the band's width of the line through them plus ``pad`` (per blob, pixels)."""
+    a longitudinal stripe whose dots, in order along it, are ``order`` (blob indices) or its
+    blurred edge: within half the band's width of the line through them plus ``pad`` (per
+    blob, pixels). Returns those whose image does not reach the band itself (plus ``image``
+    per blob): beside it, not behind it."""
     hide = _band_zone(f, order, pad, design) & pool.free
     pool.free[hide] = False
-    f.reason[hide] = "on a longitudinal stripe's band"
+    f.reason[hide] = BEHIND_BAND
+    return hide & ~_band_zone(f, order, image, design)
+
+
+BEHIND_BAND = "on a longitudinal stripe's band"  # the reason a dot is not labelled there
 
 
 MIN_CHAIN_DOTS = 8  # a straight line of at least this many dots on another surface is a stripe

@@ -18,6 +18,7 @@ from triaxtrack.calibrate.files import calibrated_camera
 from triaxtrack.detect import DetectParams, background_size_px
 from triaxtrack.identify.anchors import _axis_down, _pedestal_anchors
 from triaxtrack.identify.cell import (
+    BEHIND_BAND,
     _band_zone,
     _hide_behind_band,
     _label_cell_stripes,
@@ -31,12 +32,13 @@ from triaxtrack.identify.coded import _ct_maps, _inside_cts, _plausible_cts
 from triaxtrack.identify.grid import _Pool
 from triaxtrack.identify.membrane import (
     _is_membrane,
+    _label_beside_band,
     _label_membrane,
     _membrane_row_ends,
     _over_neighbours,
     _without_cross_support,
 )
-from triaxtrack.identify.merged import _recentred_beside_edge, _split_merged_pairs
+from triaxtrack.identify.merged import _recentred_beside_band, _recentred_beside_edge, _split_merged_pairs
 from triaxtrack.identify.state import LABEL_COLUMNS, NOT_REACHED, UNLABELLED, IdentifyParams, _Frame
 from triaxtrack.kit import ct_codes, load_kit_design, target_table
 from triaxtrack.kit_design import KitDesign
@@ -66,12 +68,14 @@ MERGED_AREA_RATIO = 1.5
 # 4,433 cell-wall dots on four tests (clean and nvr, 720p and 1080p) were over 1.6
 MERGED_LENGTH_RATIO = 1.6
 FAR_PX = 1e9
-# a membrane dot whose image comes within this of a longitudinal band's (beyond its moment
-# ellipse, where its blurred edge still darkens pixels) may be partly hidden: not labelled. At
-# 0.5 px the dots kept beside a band were as accurate as the rest on four tests (membrane p99.9
-# and maximum error unchanged); 1.0 px left 80-175 more a test unlabelled
+# a dot whose image (its moment ellipse) reaches a longitudinal band's printed edge is partly
+# hidden: not labelled. One whose image comes within this of it (where the band's blurred edge
+# still brightens pixels) leans on the band's fringe: its centroid, 0.1-0.4 px off at 4K (cam01
+# of nvr-13cam-4k: 67 such dots, 0.37 px at the 90th percentile), is re-measured against the
+# gaps beside it along its column (0.08 px; :func:`_recentred_beside_band`), or not labelled
 BAND_BLUR_PX = 0.5
-BLUR_REACH = 1.0  # a blurred band edge biases a dot about one lens-blur sigma beyond it (2: a 4K column lost)
+BLUR_REACH = 1.0  # a blurred band edge biases a dot about one lens-blur sigma beyond it
+LOCAL_DOTS = 7  # a dot and its nearest blobs, whose median size is a whole dot's there
 
 
 def _hide_behind_bands(
@@ -82,59 +86,78 @@ def _hide_behind_bands(
     design: KitDesign,
     gray: np.ndarray | None,
     detect_params: DetectParams | None,
-) -> tuple[np.ndarray, np.ndarray]:
-    """Drop what remains behind the white band of each identified longitudinal stripe (groups
-    ``long_names``): a dot whose image reaches the band's (half its major axis and
-    ``BAND_BLUR_PX``, or ``BLUR_REACH`` lens-blur sigmas ``blur_px``, from it) is partly hidden and
-    its centroid is biased. Returns that reach ``pad`` (per blob, pixels) and the blobs in a band's
-    zone (bool), widened by the white level's closing size when ``gray`` is given: beside a band a
-    dot's white level is the band's."""
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Take out of the pool what lies behind or beside the white band of each identified
+    longitudinal stripe (groups ``long_names``): a dot whose image (half its major axis) comes
+    within the band's blurred edge (``BAND_BLUR_PX``, or ``BLUR_REACH`` lens-blur sigmas
+    ``blur_px``, beyond it). Of those, a dot whose whole image (half its major axis, or half the
+    median of the dots' around it where that is longer: a dot partly behind the band images
+    smaller, and its visible part's centroid lies farther from the band than its centre)
+    reaches the band itself is partly hidden; the others are beside it, their centroids leaning
+    on the edge's fringe (labelled later from the grid around them and re-centred:
+    :func:`identify`). Returns per blob (pixels) the reaches ``(whole image, own image and blur,
+    whole image and blur)``, the blobs in a band's zone (bool), widened by the white level's
+    closing size when ``gray`` is given (beside a band a dot's white level is the band's), and
+    the dots beside a band."""
     blobs = f.blobs
+    major = blobs.major_px.to_numpy()
+    near = pool.tree.query(f.pos, k=min(LOCAL_DOTS, len(major)))[1].reshape(len(major), -1)
+    image = np.maximum(major, np.median(major[near], axis=1)) / 2 if len(major) else major / 2
     # the band's blurred edge reaches BLUR_REACH lens-blur sigmas beyond its printed edge
-    pad = blobs.major_px.to_numpy() / 2 + max(BAND_BLUR_PX, BLUR_REACH * blur_px)
+    blur = max(BAND_BLUR_PX, BLUR_REACH * blur_px)
+    pad = major / 2 + blur
     # a dot's white level is a closing over `size` pixels: beside a band it reads the band's white
     size = background_size_px(gray.shape[1], detect_params) if gray is not None else 0
-    known = np.zeros(len(blobs), bool)
+    known, beside = np.zeros(len(blobs), bool), np.zeros(len(blobs), bool)
     for sel in (np.nonzero(f.group == nm)[0] for nm in long_names):
         if len(sel) >= 2:
             order = sel[np.argsort(f.ids[sel])]
-            _hide_behind_band(f, pool, order, pad, design)
+            beside |= _hide_behind_band(f, pool, order, image, pad, design)
             known |= _band_zone(f, order, pad + size, design)
-    return pad, known
+    return np.c_[image, pad, image + blur], known, beside
 
 
 def _drop_unidentified_stripes(
-    f: _Frame, pool: _Pool, centres: dict, known: np.ndarray, pad: np.ndarray, design: KitDesign
-) -> None:
+    f: _Frame, pool: _Pool, centres: dict, known: np.ndarray, reach: np.ndarray, design: KitDesign
+) -> np.ndarray:
     """Take out of the pool the longitudinal stripes whose coded target is out of the picture: a
     straight line of free dots along the axis, on a white band in front of the membrane, never
-    membrane dots, whose band hides the membrane (``pad``: :func:`_hide_behind_bands`). Dots in an
-    identified stripe's band zone (``known``) are not candidates: their white level is its."""
+    membrane dots, whose band hides the membrane (``reach``: :func:`_hide_behind_bands`). Dots in
+    an identified stripe's band zone (``known``) are not candidates: their white level is its.
+    Returns the dots left beside these bands."""
     pos = f.pos
     axis = _axis_down(_pedestal_anchors(centres, design))
     free = np.nonzero(pool.free)[0]
     pitch = float(np.nanmedian(_row_pitch_px(pos, free, axis))) if len(free) > 9 else np.nan
     cand = np.nonzero(_on_another_surface(pool) & ~known)[0]
+    beside = np.zeros(len(pos), bool)
     for order in _straight_chains(pos, cand, axis, pitch, design):
         pool.free[order] = False
         f.reason[order] = "on a longitudinal stripe not identified (its coded target not seen)"
-        _hide_behind_band(f, pool, order, pad, design)
+        beside |= _hide_behind_band(f, pool, order, reach[:, 0], reach[:, 1], design)
+    return beside
 
 
 def _drop_inaccurate(
-    f: _Frame, edge: np.ndarray, recentred: np.ndarray, design: KitDesign, p: IdentifyParams
+    f: _Frame,
+    edge: np.ndarray,
+    recentred: np.ndarray,
+    design: KitDesign,
+    p: IdentifyParams,
+    beside: np.ndarray,
 ) -> None:
     """Unlabel (with the reason) the labelled dots whose centroid is not accurate: cut by the image
-    border; too small or seen too obliquely for their place (see :class:`IdentifyParams`:
-    cell-wall dots beside a dark edge (``edge``) need more, re-centred ones (``recentred``) less
-    roundness); the last dot of a membrane row beside a dark edge (a silhouette, a pedestal edge),
-    whose blob takes in the edge's fringe (up to 1.4 px off on the demo), while the end rows along
-    the pedestal faces keep theirs, also beside a gap where one of their dots was lost to the
-    pedestal's edge (on four tests 0.17 px at the 95th percentile; the one bad dot, 0.93 px off,
-    had taken in the edge: 1.8 times its neighbours' area); and dots merged with an edge or
-    another dot, by their size and roundness against their grid or stripe neighbours
-    (``MERGED_*``); and, of the membrane dots left, those no dot of the rows above or below
-    confirms (:func:`~triaxtrack.identify.membrane._without_cross_support`)."""
+    border; beside a longitudinal stripe's band (``beside``) and not re-centred; too small or seen
+    too obliquely for their place (see :class:`IdentifyParams`: cell-wall dots beside a dark edge
+    (``edge``) need more, re-centred ones (``recentred``) less roundness); the last dot of a
+    membrane row beside a dark edge (a silhouette, a pedestal edge), whose blob takes in the edge's
+    fringe (up to 1.4 px off on the demo), while the end rows along the pedestal faces keep theirs,
+    also beside a gap where one of their dots was lost to the pedestal's edge (on four tests 0.17 px
+    at the 95th percentile; the one bad dot, 0.93 px off, had taken in the edge: 1.8 times its
+    neighbours' area); and dots merged with an edge or another dot, by their size and roundness
+    against their grid or stripe neighbours (``MERGED_*``); and, of the membrane dots left, those no
+    dot of the rows above or below confirms
+    (:func:`~triaxtrack.identify.membrane._without_cross_support`)."""
     blobs, n, m = f.blobs, len(f.blobs), design.membrane
     membrane = _is_membrane(f.ids, m)
     cell_area = np.where(edge, p.min_cell_area_px, p.min_clear_cell_area_px)
@@ -148,6 +171,7 @@ def _drop_inaccurate(
     area = blobs.area_px.to_numpy() / diameter**2
     for bad, why in (
         (at_border, "cut by the image border"),
+        (beside & ~recentred, BEHIND_BAND),
         (blobs.area_px.to_numpy() < np.where(membrane, p.min_membrane_area_px, cell_area),
          "too small for an accurate centroid"),
         (blobs.roundness.to_numpy() < np.where(membrane, p.min_membrane_roundness, cell_round),
@@ -234,7 +258,9 @@ def identify(
     :func:`~triaxtrack.coded_targets.decode_coded_targets`; ``dots``: the blobs that pass the dot
     criteria (:func:`~triaxtrack.detect.dot_mask`); ``undistort``: (N, 2) distorted pixels ->
     undistorted pixels; ``gray``: the frame, if given, re-centres the longitudinal stripes' dots
-    beside a dark edge (:func:`~triaxtrack.detect.gap_background_centroids`) and fits membrane
+    beside a dark edge and the membrane dots beside a stripe's band
+    (:func:`~triaxtrack.detect.gap_background_centroids`; without it those are not labelled)
+    and fits membrane
     dots merged in pairs apart (:func:`_split_merged_pairs`, with ``detect_params``' ink rule).
     Returns one row per CT and per dot (columns ``LABEL_COLUMNS``), ``id`` -1 with a ``reason``
     where the dot could not be labelled beyond doubt; a merged pair's two dots have a row each.
@@ -262,9 +288,10 @@ def identify(
     _label_cell_stripes(f, pool, centres, design, p)
     _label_longitudinal(f, pool, centres, design, p)
     long_names = {s.name for s in design.cell_targets.longitudinal_stripes}
-    pad, known = _hide_behind_bands(f, pool, long_names, blur_px, design, gray, detect_params)
-    _drop_unidentified_stripes(f, pool, centres, known, pad, design)
+    reach, known, beside = _hide_behind_bands(f, pool, long_names, blur_px, design, gray, detect_params)
+    beside |= _drop_unidentified_stripes(f, pool, centres, known, reach, design)
     _label_membrane(f, pool, centres, design, p)
+    _label_beside_band(f, pool, beside, reach[:, 2], design.membrane, p)
     edge = blobs.beside_edge.to_numpy(bool, copy=True)
     recentred = np.zeros(n, bool)
     if gray is not None:
@@ -275,11 +302,16 @@ def identify(
         ok = np.isfinite(new_pos).all(axis=1)
         k, new, new_pos = k[ok], new[ok], new_pos[ok]
         uv[k], pos[k], edge[k], recentred[k] = new, new_pos, False, True
-    _drop_inaccurate(f, edge, recentred, design, p)
+        # a membrane dot beside a band: the band's fringe runs along its column, past its gaps
+        k, new = _recentred_beside_band(f, uv, beside, gray, design.membrane)
+        new_pos = undistort(new) if len(k) else new
+        ok = np.isfinite(new_pos).all(axis=1)
+        uv[k[ok]], pos[k[ok]], recentred[k[ok]] = new[ok], new_pos[ok], True
+    _drop_inaccurate(f, edge, recentred, design, p, beside)
     split = pd.DataFrame(columns=LABEL_COLUMNS)
     if gray is not None:
         # a blob nothing labelled or turned down (not by a band, a filter), clear of a dark edge
-        free = ~in_ct & invertible & ~edge & (f.reason == NOT_REACHED)
+        free = ~in_ct & invertible & ~edge & ~beside & (f.reason == NOT_REACHED)
         split = _merged_pair_rows(f, uv, gray, free, undistort, design, p, detect_params)
     return _label_table(f, cts, candidates, uv, split)
 

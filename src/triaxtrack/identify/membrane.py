@@ -17,8 +17,8 @@ import numpy as np
 import pandas as pd
 
 from triaxtrack.identify.anchors import _axis_down, _membrane_region_offsets, _MembraneView, _pedestal_anchors
-from triaxtrack.identify.grid import NEIGHBOURS, _grow_region, _Pool, ellipse_radius
-from triaxtrack.identify.state import IdentifyParams, _assign, _Frame
+from triaxtrack.identify.grid import NEIGHBOURS, _grow_region, _Pool, ellipse_radius, grow_grid
+from triaxtrack.identify.state import UNLABELLED, IdentifyParams, _assign, _Frame
 from triaxtrack.kit_design import KitDesign, MembraneDesign
 
 
@@ -218,6 +218,42 @@ def _row_ends(
         slope = ((p - q) @ axis) / dr
         out[int(i)] = (float(p @ axis + slope * (mid - p @ right)), abs(mid - p @ right), abs(dr))
     return out
+
+
+def _label_beside_band(
+    f: _Frame, pool: _Pool, beside: np.ndarray, reach: np.ndarray, m: MembraneDesign, p: IdentifyParams
+) -> None:
+    """Label the membrane dots ``beside`` a longitudinal stripe's band, which the regions'
+    growth and their bridges across the bands (:func:`_label_membrane`) did not see, by
+    extending the labelled grid onto them alone (:func:`~triaxtrack.identify.grid.grow_grid`:
+    each predicted from its labelled neighbours, taken when it is the only dot within the gate),
+    so that the regions and their IDs are as without them. A dot is taken only where its row
+    neighbours lie at least twice its image's ``reach`` (per blob, pixels: half its size and
+    the blur's) away: nearer, as columns crowd towards a silhouette, the one behind the band
+    runs into it (at 1080p a merged blob 1.1 px off)."""
+    member = np.nonzero(_is_membrane(f.ids, m))[0]
+    cand = beside & (f.ids == UNLABELLED)
+    if not len(member) or not cand.any():
+        return
+    k = f.ids[member] - m.first_id
+    rows, cols = k // m.columns, k % m.columns
+    # columns unwrapped around the specimen, the seam in the widest gap between labelled ones
+    used = np.unique(cols)
+    cut = used[(np.argmax(np.diff(np.r_[used, used[0] + m.columns])) + 1) % len(used)]
+    cols = (cols - cut) % m.columns + cut
+    seed = {(int(r), int(c)): int(b) for r, c, b in zip(rows, cols, member, strict=True)}
+    taken = set(f.ids[member].tolist())
+    free = pool.free.copy()
+    pool.free[:] = cand
+    grid = grow_grid(pool, seed, p.gate)
+    pool.free[:] = free
+    uv = f.blobs[["u_px", "v_px"]].to_numpy()
+    for (r, c), b in grid.items():
+        tid = r * m.columns + c % m.columns + m.first_id
+        row = [np.linalg.norm(uv[grid[(r, c + dc)]] - uv[b]) for dc in (-1, 1) if (r, c + dc) in grid]
+        if (r, c) not in seed and 0 <= r < m.rows and tid not in taken and row and min(row) >= 2 * reach[b]:
+            _assign(f, b, tid, "membrane_beside_band", 0.9)
+            taken.add(tid)
 
 
 def _grid_ids(grid: dict, c_off: int, r_off: int, m: MembraneDesign) -> dict:

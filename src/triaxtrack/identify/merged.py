@@ -1,5 +1,6 @@
 """Dots whose image merged with something: a longitudinal stripe's dots re-centred beside a dark
-edge, and membrane dots merged in pairs fitted apart.
+edge, membrane dots re-centred beside a stripe's white band, and membrane dots merged in pairs
+fitted apart.
 
 Two membrane dots whose images merged into one blob (at high strain and low resolution) are
 labelled once the grid around them is: between their labelled neighbours along a column or a
@@ -43,6 +44,29 @@ def _recentred_beside_edge(
             prev.append(a)
             nxt.append(b)
     at = np.asarray(sel, int)
+    if not len(at):
+        return at, np.zeros((0, 2))
+    minor = f.blobs.minor_px.to_numpy()[at]
+    new = gap_background_centroids(gray, uv[at], uv[prev], uv[nxt], 0.5 * minor + GAP_ACROSS_PX)
+    ok = np.isfinite(new).all(axis=1)
+    return at[ok], new[ok]
+
+
+def _recentred_beside_band(
+    f: _Frame, uv: np.ndarray, beside: np.ndarray, gray: np.ndarray, m: MembraneDesign
+) -> tuple[np.ndarray, np.ndarray]:
+    """(blob indices, their new distorted centroids) of the labelled membrane dots ``beside`` a
+    longitudinal stripe's white band whose two neighbours along their column are labelled,
+    re-centred by :func:`~triaxtrack.detect.gap_background_centroids`: the band's blurred edge
+    runs along the column, so it brightens the gaps beside each dot as it does the dot's own
+    surround, and cancels; where that fails, left out."""
+    member = np.nonzero(_is_membrane(f.ids, m))[0]
+    blob_of = pd.Series(member, index=f.ids[member])
+    blob_of = blob_of[~blob_of.index.duplicated()]
+    at = member[beside[member]]
+    prev, nxt = (blob_of.reindex(_grid_neighbour(f.ids[at], m, dr, 0)).to_numpy() for dr in (-1, 1))
+    ok = np.isfinite(prev) & np.isfinite(nxt)
+    at, prev, nxt = at[ok], prev[ok].astype(int), nxt[ok].astype(int)
     if not len(at):
         return at, np.zeros((0, 2))
     minor = f.blobs.minor_px.to_numpy()[at]
