@@ -16,12 +16,14 @@ Modules (the method of each step is described in its module):
 * :mod:`~triaxtrack.identify.coded`: the decoded CTs (centres and ellipse maps, the blobs on
   their labels, the plausible ones, the CT stripes);
 * :mod:`~triaxtrack.identify.cell`: the cell's annular stripes (Eq. 1) and longitudinal
-  stripes, and the bands that hide the membrane behind them;
+  stripes, and the bands that hide the membrane behind them (and the dots beside them);
 * :mod:`~triaxtrack.identify.membrane`: the membrane grid's regions, phase and IDs (Eq. 4),
-  regions fixed across a band, and the grid-neighbour checks on membrane IDs;
+  regions fixed across a band, the dots beside a band labelled from the grid around them, and
+  the grid-neighbour checks on membrane IDs;
 * :mod:`~triaxtrack.identify.anchors`: the pedestal CTs that fix a region's column and row;
-* :mod:`~triaxtrack.identify.merged`: stripe dots re-centred beside a dark edge, and membrane
-  dots merged in pairs fitted apart (``quality`` ``MERGED_QUALITY``);
+* :mod:`~triaxtrack.identify.merged`: stripe dots re-centred beside a dark edge, membrane dots
+  re-centred beside a band, and membrane dots merged in pairs fitted apart (``quality``
+  ``MERGED_QUALITY``);
 * :mod:`~triaxtrack.identify.frame`: :func:`identify` (one frame's detections, then the accuracy
   filters), :func:`label_frame`, :func:`label_chunk_start` and :func:`draw_labels`, and the
   workflow's stages (:func:`run_identify_targets`, :func:`run_collect_labels`).

@@ -8,7 +8,9 @@ when exactly one detected dot lies within the gate. The larger dots (every fourt
 column, Eqs. 2-3) give the grid's phase by their area (:func:`_grid_phase`); the pedestal CTs
 give the column and row offsets (:mod:`~triaxtrack.identify.anchors`). ID = (r - 1) * 64 + c +
 1000 (Eq. 4). A region no pedestal CT fixes (beyond a longitudinal stripe's band) is fixed across
-the band from a fixed neighbour (:func:`_bridge`).
+the band from a fixed neighbour (:func:`_bridge`). The dots beside a band (its blurred edge in
+their image) are kept out of the regions and taken on afterwards from the labelled grid around
+them (:func:`_label_beside_band`).
 """
 
 from __future__ import annotations
