@@ -686,13 +686,18 @@ def test_membrane_dots_beside_a_bright_band_are_recentred_against_the_gaps(kit):
     assert np.hypot(*(new - truth[1:-1]).T).max() < 0.1
 
 
-@pytest.mark.parametrize("across_px, taken", [(10.0, True), (4.5, False)])
-def test_membrane_dots_beside_a_band_are_labelled_from_the_grid_where_resolved(kit, across_px, taken):
+@pytest.mark.parametrize(
+    "across_px, blur_px, taken", [(10.0, 0.5, True), (4.5, 0.5, False), (10.0, 1.0, False)]
+)
+def test_membrane_dots_beside_a_band_are_labelled_from_the_grid_where_resolved(
+    kit, across_px, blur_px, taken
+):
     """Membrane columns 3-7 (rows 10-19) labelled and, beyond them, column 8 beside a band (kept
     out of the regions' growth): the grid is extended onto column 8 alone, its IDs by Eq. 4,
-    where its dots stand clear of their row neighbours (10 px apart, twice the 2.5 px reach of
-    their image and blur). Where the columns crowd to 4.5 px (towards a silhouette) none is taken.
-    A free dot not beside the band (column 9) is never taken."""
+    where its dots (radius 2 px) stand clear of their row neighbours (10 px apart, twice the
+    2.5 px reach of their image and a band's blurred edge of 0.5 px). Where the columns crowd to
+    4.5 px (towards a silhouette), or the band's edge is blurred over half the dot's radius, none
+    is taken. A free dot not beside the band (column 9) is never taken."""
     m = kit[0].membrane
     nodes = [(r, c) for r in range(10, 20) for c in range(3, 10)]
     pos = np.array([(100.0 + across_px * c, 50.0 + 10.0 * r) for r, c in nodes])
@@ -703,7 +708,7 @@ def test_membrane_dots_beside_a_band_are_labelled_from_the_grid_where_resolved(k
     f = _Frame(blobs, pos, ids.copy(), empty.copy(), np.zeros(len(pos)), empty.copy())
     beside = np.array([c == 8 for _, c in nodes])
     pool = _Pool(pos, np.zeros(len(pos), bool), blobs)
-    _label_beside_band(f, pool, beside, np.full(len(pos), 2.5), m, IdentifyParams())
+    _label_beside_band(f, pool, beside, np.full(len(pos), 2.0), blur_px, m, IdentifyParams())
     col8 = [m.first_id + r * m.columns + 8 for r, c in nodes if c == 8]
     assert list(f.ids[beside]) == (col8 if taken else [UNLABELLED] * len(col8))
     assert (f.ids[[c == 9 for _, c in nodes]] == UNLABELLED).all()

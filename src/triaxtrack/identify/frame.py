@@ -78,6 +78,12 @@ BLUR_REACH = 1.0  # a blurred band edge biases a dot about one lens-blur sigma b
 LOCAL_DOTS = 7  # a dot and its nearest blobs, whose median size is a whole dot's there
 
 
+def _band_blur(blur_px: float) -> float:
+    """How far (pixels) a band's blurred edge reaches beyond its printed edge: ``BLUR_REACH``
+    lens-blur sigmas ``blur_px``, at least ``BAND_BLUR_PX``."""
+    return max(BAND_BLUR_PX, BLUR_REACH * blur_px)
+
+
 def _hide_behind_bands(
     f: _Frame,
     pool: _Pool,
@@ -95,17 +101,15 @@ def _hide_behind_bands(
     smaller, and its visible part's centroid lies farther from the band than its centre)
     reaches the band itself is partly hidden; the others are beside it, their centroids leaning
     on the edge's fringe (labelled later from the grid around them and re-centred:
-    :func:`identify`). Returns per blob (pixels) the reaches ``(whole image, own image and blur,
-    whole image and blur)``, the blobs in a band's zone (bool), widened by the white level's
+    :func:`identify`). Returns per blob (pixels) the reaches ``(whole image, own image and
+    blur)``, the blobs in a band's zone (bool), widened by the white level's
     closing size when ``gray`` is given (beside a band a dot's white level is the band's), and
     the dots beside a band."""
     blobs = f.blobs
     major = blobs.major_px.to_numpy()
     near = pool.tree.query(f.pos, k=min(LOCAL_DOTS, len(major)))[1].reshape(len(major), -1)
     image = np.maximum(major, np.median(major[near], axis=1)) / 2 if len(major) else major / 2
-    # the band's blurred edge reaches BLUR_REACH lens-blur sigmas beyond its printed edge
-    blur = max(BAND_BLUR_PX, BLUR_REACH * blur_px)
-    pad = major / 2 + blur
+    pad = major / 2 + _band_blur(blur_px)
     # a dot's white level is a closing over `size` pixels: beside a band it reads the band's white
     size = background_size_px(gray.shape[1], detect_params) if gray is not None else 0
     known, beside = np.zeros(len(blobs), bool), np.zeros(len(blobs), bool)
@@ -114,7 +118,7 @@ def _hide_behind_bands(
             order = sel[np.argsort(f.ids[sel])]
             beside |= _hide_behind_band(f, pool, order, image, pad, design)
             known |= _band_zone(f, order, pad + size, design)
-    return np.c_[image, pad, image + blur], known, beside
+    return np.c_[image, pad], known, beside
 
 
 def _drop_unidentified_stripes(
@@ -291,7 +295,7 @@ def identify(
     reach, known, beside = _hide_behind_bands(f, pool, long_names, blur_px, design, gray, detect_params)
     beside |= _drop_unidentified_stripes(f, pool, centres, known, reach, design)
     _label_membrane(f, pool, centres, design, p)
-    _label_beside_band(f, pool, beside, reach[:, 2], design.membrane, p)
+    _label_beside_band(f, pool, beside, reach[:, 0], _band_blur(blur_px), design.membrane, p)
     edge = blobs.beside_edge.to_numpy(bool, copy=True)
     recentred = np.zeros(n, bool)
     if gray is not None:
