@@ -129,15 +129,31 @@ def _white_band(hist: np.ndarray, count: int) -> tuple[float, float]:
 
 
 @numba.njit(cache=True)
+def _inner_columns(ring_r2: float, h: int, inner: np.ndarray) -> None:
+    """``inner[d]`` for d = 0..h: the largest column offset c >= 0 with c^2 + d^2 <= ``ring_r2``
+    (-1: none), from the centre row out (each row's is at most the one before)."""
+    c = int(math.sqrt(ring_r2)) if ring_r2 >= 0 else -1
+    while (c + 1) * (c + 1) <= ring_r2:
+        c += 1
+    for d in range(h + 1):
+        while c >= 0 and c * c + d * d > ring_r2:
+            c -= 1
+        inner[d] = c
+
+
+@numba.njit(cache=True)
 def _copy(
-    g: np.ndarray, y0: int, x0: int, n: int, ring_r2: float, hist: np.ndarray, wins: np.ndarray, at: int
-) -> None:
+    g: np.ndarray, y0: int, x0: int, n: int, ring_r2: float, hist: np.ndarray, wins: np.ndarray, at: int,
+    inner: np.ndarray,
+) -> None:  # fmt: skip
     """Copy the ``n`` x ``n`` window at (``x0``, ``y0``) of the frame ``g`` into ``wins`` from
     ``at`` (padded: :func:`_geometry`; the padding 255) and count its levels in ``hist`` (768):
     two interleaved histograms of the window (a run of one level does not wait on itself), then
-    the annulus's (pixels beyond ``ring_r2``, squared distance from the centre)."""
+    the annulus's (pixels beyond ``ring_r2``, squared distance from the centre; ``inner``:
+    scratch for :func:`_inner_columns`)."""
     hist[:] = 0
     h, stride = n // 2, _U(n + 2)
+    _inner_columns(ring_r2, h, inner)
     for q in range(stride * stride):
         wins[at + q] = 255
     for i in range(n):
@@ -146,15 +162,8 @@ def _copy(
             v = g[y, _U(x0) + j]
             wins[row + j] = v
             hist[_U(v) + ((j & _U(1)) << _U(8))] += 1
-        dy2 = (i - h) * (i - h)
-        inner = -1  # the annulus: the columns farther than this from the centre's
-        if dy2 <= ring_r2:
-            inner = int(math.sqrt(ring_r2 - dy2))
-            while (inner + 1) * (inner + 1) + dy2 <= ring_r2:
-                inner += 1
-            while inner >= 0 and inner * inner + dy2 > ring_r2:
-                inner -= 1
-        left, right = (h - inner, h + inner + 1) if inner >= 0 else (n, n)
+        c = inner[abs(i - h)]  # the annulus: the columns farther than this from the centre's
+        left, right = (h - c, h + c + 1) if c >= 0 else (n, n)
         for j in range(_U(left)):
             hist[_U(512) + _U(wins[row + j])] += 1
         for j in range(_U(right), _U(n)):
@@ -440,10 +449,11 @@ def _measure_all(g: np.ndarray, uv: np.ndarray, rad: np.ndarray, ink_fraction: f
     start[1:] = np.cumsum((sizes + 2) ** 2)
     wins = np.empty(start[-1], np.uint8)  # each window's pixels, copied once (the frame is large)
     hist = np.empty(768, np.int32)
+    inner = np.empty(half.max() + 1 if n else 1, np.int64)
     white, noise, s_white = np.full(n, np.nan), np.full(n, np.nan), np.zeros(n)
     for k, t in enumerate(sel):
         y0, x0, ring_r2 = centre[t, 1] - half[t], centre[t, 0] - half[t], (rad[t] + ANNULUS_GAP_PX) ** 2
-        _copy(g, y0, x0, sizes[k], ring_r2, hist, wins, _U(start[k]))
+        _copy(g, y0, x0, sizes[k], ring_r2, hist, wins, _U(start[k]), inner)
         white[t], noise[t], s_white[t] = _levels(hist, sizes[k])
     out = np.full((n, 2), np.nan), np.zeros(n), np.zeros(n), np.zeros(n), np.full(n, np.nan)
     if m == 0:
