@@ -43,7 +43,15 @@ def _recentred_beside_edge(
             sel.append(k)
             prev.append(a)
             nxt.append(b)
-    at = np.asarray(sel, int)
+    return _recentred_between(f, uv, np.asarray(sel, int), np.asarray(prev, int), np.asarray(nxt, int), gray)
+
+
+def _recentred_between(
+    f: _Frame, uv: np.ndarray, at: np.ndarray, prev: np.ndarray, nxt: np.ndarray, gray: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """(blob indices, their new distorted centroids) of the dots ``at`` (blob indices) between
+    their neighbours ``prev`` and ``nxt`` along a row of dots, re-centred by
+    :func:`~triaxtrack.detect.gap_background_centroids`; where that fails, left out."""
     if not len(at):
         return at, np.zeros((0, 2))
     minor = f.blobs.minor_px.to_numpy()[at]
@@ -66,13 +74,7 @@ def _recentred_beside_band(
     at = member[beside[member]]
     prev, nxt = (blob_of.reindex(_grid_neighbour(f.ids[at], m, dr, 0)).to_numpy() for dr in (-1, 1))
     ok = np.isfinite(prev) & np.isfinite(nxt)
-    at, prev, nxt = at[ok], prev[ok].astype(int), nxt[ok].astype(int)
-    if not len(at):
-        return at, np.zeros((0, 2))
-    minor = f.blobs.minor_px.to_numpy()[at]
-    new = gap_background_centroids(gray, uv[at], uv[prev], uv[nxt], 0.5 * minor + GAP_ACROSS_PX)
-    ok = np.isfinite(new).all(axis=1)
-    return at[ok], new[ok]
+    return _recentred_between(f, uv, at[ok], prev[ok].astype(int), nxt[ok].astype(int), gray)
 
 
 def _split_merged_pairs(
