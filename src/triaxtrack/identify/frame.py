@@ -72,7 +72,8 @@ FAR_PX = 1e9
 # hidden: not labelled. One whose image comes within this of it (where the band's blurred edge
 # still brightens pixels) leans on the band's fringe: its centroid, 0.1-0.4 px off at 4K (cam01
 # of nvr-13cam-4k: 67 such dots, 0.37 px at the 90th percentile), is re-measured against the
-# gaps beside it along its column (0.08 px; :func:`_recentred_beside_band`), or not labelled
+# gaps beside it along its column (there 0.04 px at the median, 0.16 px at worst:
+# :func:`_recentred_beside_band`), or not labelled
 BAND_BLUR_PX = 0.5
 BLUR_REACH = 1.0  # a blurred band edge biases a dot about one lens-blur sigma beyond it
 LOCAL_DOTS = 7  # a dot and its nearest blobs, whose median size is a whole dot's there
@@ -97,14 +98,13 @@ def _hide_behind_bands(
     longitudinal stripe (groups ``long_names``): a dot whose image (half its major axis) comes
     within the band's blurred edge (``BAND_BLUR_PX``, or ``BLUR_REACH`` lens-blur sigmas
     ``blur_px``, beyond it). Of those, a dot whose whole image (half its major axis, or half the
-    median of the dots' around it where that is longer: a dot partly behind the band images
-    smaller, and its visible part's centroid lies farther from the band than its centre)
-    reaches the band itself is partly hidden; the others are beside it, their centroids leaning
-    on the edge's fringe (labelled later from the grid around them and re-centred:
-    :func:`identify`). Returns per blob (pixels) the reaches ``(whole image, own image and
-    blur)``, the blobs in a band's zone (bool), widened by the white level's
-    closing size when ``gray`` is given (beside a band a dot's white level is the band's), and
-    the dots beside a band."""
+    median of the dots' around it where that is longer: a dot partly behind the band images smaller,
+    and its visible part's centroid lies farther from the band than its centre) reaches the band
+    itself is partly hidden; the others are beside it, their centroids leaning on the edge's fringe
+    (labelled later from the grid around them and re-centred: :func:`identify`). Returns per blob
+    (pixels) the reaches ``(whole image, own image and blur)``, the blobs in a band's zone (bool),
+    widened by the white level's closing size when ``gray`` is given (beside a band a dot's white
+    level is the band's), and the dots beside a band."""
     blobs = f.blobs
     major = blobs.major_px.to_numpy()
     near = pool.tree.query(f.pos, k=min(LOCAL_DOTS, len(major)))[1].reshape(len(major), -1)
@@ -264,8 +264,8 @@ def identify(
     undistorted pixels; ``gray``: the frame, if given, re-centres the longitudinal stripes' dots
     beside a dark edge and the membrane dots beside a stripe's band
     (:func:`~triaxtrack.detect.gap_background_centroids`; without it those are not labelled)
-    and fits membrane
-    dots merged in pairs apart (:func:`_split_merged_pairs`, with ``detect_params``' ink rule).
+    and fits membrane dots merged in pairs apart (:func:`_split_merged_pairs`, with
+    ``detect_params``' ink rule).
     Returns one row per CT and per dot (columns ``LABEL_COLUMNS``), ``id`` -1 with a ``reason``
     where the dot could not be labelled beyond doubt; a merged pair's two dots have a row each.
     """
@@ -315,7 +315,7 @@ def identify(
     split = pd.DataFrame(columns=LABEL_COLUMNS)
     if gray is not None:
         # a blob nothing labelled or turned down (not by a band, a filter), clear of a dark edge
-        free = ~in_ct & invertible & ~edge & ~beside & (f.reason == NOT_REACHED)
+        free = ~in_ct & invertible & ~edge & (f.reason == NOT_REACHED)
         split = _merged_pair_rows(f, uv, gray, free, undistort, design, p, detect_params)
     return _label_table(f, cts, candidates, uv, split)
 
