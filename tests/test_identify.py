@@ -36,7 +36,7 @@ from triaxtrack.identify import (
 from triaxtrack.identify.anchors import MAX_PITCH_CHANGE, ROW_PITCH_RANGE, _anchor_offsets, _MembraneView
 from triaxtrack.identify.cell import _over_chain_neighbours, _row_pitch_px, _straight_chains
 from triaxtrack.identify.coded import _ct_stripes, _plausible_cts
-from triaxtrack.identify.membrane import _label_beside_band
+from triaxtrack.identify.membrane import _label_beside_band, _off_grid
 from triaxtrack.identify.merged import _recentred_beside_band
 from triaxtrack.identify.state import UNLABELLED
 from triaxtrack.kit import coded_target_polygons, ct_codes, load_kit_design, target_table
@@ -364,6 +364,32 @@ def test_a_rows_chain_alone_is_not_confirmed():
     bottom = [1001 + 64 * 59 + 5, 1001 + 64 * 58 + 5]  # the last row, its column's dot above
     alone = _without_cross_support(np.array(top + second + bottom + [131, -1]), m)
     assert alone.tolist() == [False, False, True, True] + [True, False, False] + [False, False, False, False]
+
+
+def test_membrane_dots_off_their_grid_lines():
+    """A membrane dot pulled 0.7-1.5 px off the smooth lines of its grid column and row (a
+    silhouette's fringe or a neighbour in its centroid) is found, and only it: not its
+    neighbours, whose lines it bends, nor any dot of a grid seen obliquely towards a silhouette
+    (smaller dots there, their centroids noisier: up to 0.1 px against 0.04 px), around the
+    column seam, or at the grid's edge."""
+    m = MEMBRANE
+    rng = np.random.default_rng(5)
+    rows, cols = np.arange(10, 31), np.r_[50:64, 0:12]  # columns 50-63 and 0-11: across the seam
+    r, c = np.meshgrid(rows, cols, indexing="ij")
+    theta = np.deg2rad(((c - 50) % 64) * 5.625 - 80.0)  # from 80 degrees off the line of sight
+    u = 900.0 + 400.0 * np.sin(theta)
+    v = 100.0 + 9.0 * r + 0.02 * (u - 900.0) ** 2 / 40.0  # rows curve towards the silhouettes
+    ids = (r * m.columns + c + m.first_id).ravel()
+    area = (3.0 + 30.0 * np.cos(theta)).ravel()
+    noise = 0.04 * np.sqrt(20.0 / area)  # pixels: a smaller dot's centroid is noisier
+    pos = np.c_[u.ravel(), v.ravel()] + rng.normal(0.0, 1.0, (len(ids), 2)) * noise[:, None]
+    assert not _off_grid(ids, pos, area, m).any()
+    moved = {(15, 51): (1.5, 0.0), (20, 2): (0.0, -1.0), (25, 60): (0.5, 0.5), (12, 8): (-0.7, 0.0)}
+    bad = pos.copy()
+    for (i, j), d in moved.items():
+        bad[np.nonzero(ids == i * m.columns + j + m.first_id)[0][0]] += d
+    found = _off_grid(np.r_[ids, 131, -1], np.r_[bad, [[0.0, 0.0], [5.0, 5.0]]], np.r_[area, 20.0, 20.0], m)
+    assert sorted(ids[found[: len(ids)]]) == sorted(i * m.columns + j + m.first_id for i, j in moved)
 
 
 def test_roundness_compared_with_the_grid_neighbours():

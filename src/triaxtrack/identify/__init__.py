@@ -19,7 +19,9 @@ Modules (the method of each step is described in its module):
   stripes, and the bands that hide the membrane behind them (and the dots beside them);
 * :mod:`~triaxtrack.identify.membrane`: the membrane grid's regions, phase and IDs (Eq. 4),
   regions fixed across a band, the dots beside a band labelled from the grid around them, and
-  the grid-neighbour checks on membrane IDs;
+  the grid-neighbour checks on membrane IDs (a dot off the smooth lines of its grid column and
+  row by more than its size class's centroid noise allows is not labelled:
+  :func:`~triaxtrack.identify.membrane._off_grid`);
 * :mod:`~triaxtrack.identify.anchors`: the pedestal CTs that fix a region's column and row;
 * :mod:`~triaxtrack.identify.merged`: stripe dots re-centred beside a dark edge, membrane dots
   re-centred beside a band, and membrane dots merged in pairs fitted apart (``quality``

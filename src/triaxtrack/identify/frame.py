@@ -35,6 +35,7 @@ from triaxtrack.identify.membrane import (
     _label_beside_band,
     _label_membrane,
     _membrane_row_ends,
+    _off_grid,
     _over_neighbours,
     _without_cross_support,
 )
@@ -68,6 +69,7 @@ MERGED_AREA_RATIO = 1.5
 # 4,433 cell-wall dots on four tests (clean and nvr, 720p and 1080p) were over 1.6
 MERGED_LENGTH_RATIO = 1.6
 FAR_PX = 1e9
+OFF_GRID = "off the line of its grid column or row (an edge's fringe or a neighbour in its centroid)"
 # a dot whose image (its moment ellipse) reaches a longitudinal band's printed edge is partly
 # hidden: not labelled. One whose image comes within this of it (where the band's blurred edge
 # still brightens pixels) leans on the band's fringe: its centroid, 0.1-0.4 px off at 4K (cam01
@@ -195,7 +197,10 @@ def _drop_inaccurate(
         bad &= f.ids != UNLABELLED
         f.ids[bad] = UNLABELLED
         f.reason[bad] = why
-    alone = _without_cross_support(f.ids, m) & (f.ids != UNLABELLED)  # on the labels left
+    off = _off_grid(f.ids, f.pos, blobs.area_px.to_numpy(), m)  # on the labels left
+    f.ids[off] = UNLABELLED
+    f.reason[off] = OFF_GRID
+    alone = _without_cross_support(f.ids, m) & (f.ids != UNLABELLED)
     f.ids[alone] = UNLABELLED
     f.reason[alone] = "no labelled grid neighbour in the rows above or below (a row's chain alone)"
 
