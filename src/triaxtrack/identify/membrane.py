@@ -367,6 +367,11 @@ OFF_GRID_DEGREE = 3
 # found). On eight realistic tests 0.1 % of the other labels (0.5 % at 4K, 0.04 % at 1080p
 # dim) are found, 0.2-0.4 px off at the median against 0.05-0.10 px for all labels
 OFF_GRID_MEDIANS = 3.5
+# ... and at least this far (pixels), whatever the noise: as close as the tracker's centroid must
+# agree with the identification's (TrackingConfig.first_agreement_px), far under the 1 px that
+# makes an ID wrong. On the clean demo the medians are 0.02-0.03 px, and without it 3.5 of them
+# took 0.4 % of the demo's labels (0.11 px off at the median) and 0.5 % at 4K (0.24 px)
+OFF_GRID_FLOOR_PX = 0.25
 OFF_GRID_CLASSES = 10  # size classes of the dots, each with its own median distance ...
 OFF_GRID_CLASS_DOTS = 100  # ... of at least this many dots
 OFF_GRID_ROUNDS = 3  # the lines refitted without the dots found off them, this many times at most
@@ -409,10 +414,10 @@ def _off_grid(ids: np.ndarray, pos: np.ndarray, area: np.ndarray, m: MembraneDes
     lines of their grid column or row (:func:`_line_residuals`) by more than ``OFF_GRID_MEDIANS``
     times the median distance of the frame's dots of their size (``area``, pixels; a small dot,
     foreshortened towards a silhouette, has a noisier centroid: up to twice the median distance
-    of the others): a centroid pulled off its place by an edge's fringe or a neighbour it merged
-    with. Such a dot bends its neighbours' lines too, so the lines are fitted again without the
-    dots found off them (a dot too few clean neighbours leave keeps its first distance),
-    ``OFF_GRID_ROUNDS`` times at most."""
+    of the others) and more than ``OFF_GRID_FLOOR_PX``: a centroid pulled off its place by an
+    edge's fringe or a neighbour it merged with. Such a dot bends its neighbours' lines too, so
+    the lines are fitted again without the dots found off them (a dot too few clean neighbours
+    leave keeps its first distance), ``OFF_GRID_ROUNDS`` times at most."""
     ids = np.asarray(ids, np.int64)
     pos = np.asarray(pos, np.float64)
 
@@ -430,7 +435,7 @@ def _off_grid(ids: np.ndarray, pos: np.ndarray, area: np.ndarray, m: MembraneDes
     overall = float(np.median(first[fitted]))
     typical = np.array([np.median(first[fitted & (size_class == k)]) if (size_class[fitted] == k).any()
                         else overall for k in range(n_class)])  # fmt: skip
-    limit = OFF_GRID_MEDIANS * typical[size_class]
+    limit = np.maximum(OFF_GRID_MEDIANS * typical[size_class], OFF_GRID_FLOOR_PX)
     off = first > limit
     for _ in range(OFF_GRID_ROUNDS):
         if not off.any():
