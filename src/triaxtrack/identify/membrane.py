@@ -364,8 +364,8 @@ OFF_GRID_DEGREE = 3
 # dots; medians 0.09-0.15 px, up to twice that for the smallest dots) the four dots more than
 # 1 px off were grazing dots at a silhouette: two merged with its fringe (1.5-1.6 px off) were
 # 10-11 medians of their size off, two faint ones 1.0 px off were 3.6 and 3.1 (the second not
-# found). On eight realistic tests 0.1 % of the other labels (0.5 % at 4K, 0.04 % at 1080p
-# dim) are found, 0.2-0.4 px off at the median against 0.05-0.10 px for all labels
+# found). Of the other labels at every chunk start, 0.04-0.09 % are found (dim, 260 mm, 1080p
+# and 4K tests), 0.2-0.4 px off at the median against 0.05-0.10 px for all labels
 OFF_GRID_MEDIANS = 3.5
 # ... and at least this far (pixels), whatever the noise: as close as the tracker's centroid must
 # agree with the identification's (TrackingConfig.first_agreement_px), far under the 1 px that
