@@ -402,11 +402,12 @@ def _line_residuals(
     design = (offsets[:, None] ** np.arange(OFF_GRID_DEGREE + 1))[None] * has[..., None]
     normal = np.einsum("nki,nkj->nij", design, design)
     normal[~fitted] = np.eye(OFF_GRID_DEGREE + 1)
-    coef = np.linalg.solve(normal, np.einsum("nki,nkd->nid", design, np.where(has[..., None], nb, 0.0)))
-    # the line's value at the dot carries its neighbours' noise, amplified by where they lie:
-    # the residual's spread is sqrt(1 + (normal^-1)_00) times a centroid's
-    spread = np.sqrt(1.0 + np.linalg.inv(normal)[:, 0, 0])
-    return np.where(fitted, np.linalg.norm(pos - coef[:, 0], axis=1) / spread, np.nan)
+    inverse = np.linalg.inv(normal)
+    # the line's value at the dot (the fit's constant term), and its spread: it carries the
+    # neighbours' noise, amplified by where they lie, sqrt(1 + (normal^-1)_00) times a centroid's
+    at_dot = np.einsum("nj,nkj,nkd->nd", inverse[:, 0], design, np.where(has[..., None], nb, 0.0))
+    spread = np.sqrt(1.0 + inverse[:, 0, 0])
+    return np.where(fitted, np.linalg.norm(pos - at_dot, axis=1) / spread, np.nan)
 
 
 def _off_grid(ids: np.ndarray, pos: np.ndarray, area: np.ndarray, m: MembraneDesign) -> np.ndarray:
