@@ -36,7 +36,7 @@ from triaxtrack.identify import (
 from triaxtrack.identify.anchors import MAX_PITCH_CHANGE, ROW_PITCH_RANGE, _anchor_offsets, _MembraneView
 from triaxtrack.identify.cell import _over_chain_neighbours, _row_pitch_px, _straight_chains
 from triaxtrack.identify.coded import _ct_stripes, _plausible_cts
-from triaxtrack.identify.membrane import _label_beside_band, _off_grid
+from triaxtrack.identify.membrane import _facing_column, _label_beside_band, _off_grid
 from triaxtrack.identify.merged import _recentred_beside_band
 from triaxtrack.identify.state import UNLABELLED
 from triaxtrack.kit import coded_target_polygons, ct_codes, load_kit_design, target_table
@@ -487,6 +487,16 @@ def test_a_sparse_column_beside_a_band_is_passed_over(kit):
     fixed, beyond, pos = _patches_across_a_band(lambda r: r in (8, 14, 20), lambda c, r: 10.0 * c)
     phase = ((m.large_first - 3) % m.large_step, (m.large_first - 20) % m.large_step)
     assert _bridge(beyond, phase, fixed, (0, 0), pos, np.array([0.0, 1.0]), design) == (20, 3)
+
+
+def test_a_facing_column_holds_half_the_rows_of_the_fullest():
+    """Columns 10-19 hold rows 5-25 (21 rows); column 9, the outermost, seven of them (enough to
+    match but broken up beside the band): the column facing the band is 10, the next in. With
+    eleven rows column 9 faces it."""
+    for rows, facing in ((range(5, 26, 3), 10), (range(5, 26, 2), 9)):
+        grid = {(r, c): 0 for r in range(5, 26) for c in range(10, 20)}
+        grid.update({(r, 9): 0 for r in rows})
+        assert _facing_column(grid, 9, 1) == facing
 
 
 def test_larger_dots_found_where_dot_size_falls_across_the_region():

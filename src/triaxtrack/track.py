@@ -78,7 +78,7 @@ from triaxtrack.nearest import crowded
 from triaxtrack.neighbour_motion import affine_flow, reference_places, unwrap_motion
 from triaxtrack.track_kernels import advance, shape_changed
 from triaxtrack.tracking_config import TrackingConfig
-from triaxtrack.window import WindowMeasure, measure_windows
+from triaxtrack.window import WindowMeasure, disc_radius, measure_windows
 
 REFERENCE_WIDTH = 3.0  # x spacing: the width of the displacement field that places a dot taken on
 NEIGHBOURS = 12  # same-kind neighbours whose motion predicts a target's (local affine flow)
@@ -183,9 +183,7 @@ def _init_state(labels: pd.DataFrame, cfg: TrackingConfig) -> _State:
         spacing = d[:, 1]
     else:
         spacing = np.full(len(uv), np.inf)
-    area = np.maximum(own["area_px"].to_numpy(np.float64), 1.0)
-    roundness = np.clip(own["roundness"].to_numpy(np.float64), 0.2, 1.0)
-    radius = np.sqrt(area / (np.pi * roundness)) + cfg.disc_margin_px  # semi-major axis + margin
+    radius = disc_radius(own["area_px"].to_numpy(), own["roundness"].to_numpy(), cfg.disc_margin_px)
     n, kind = len(ids), target_kind(ids)
     return _State(
         ids=ids, kind=kind, ref_uv=np.full((n, 2), np.nan), ref_mass=np.full(n, np.nan),

@@ -480,6 +480,15 @@ def _measure_all(g: np.ndarray, uv: np.ndarray, rad: np.ndarray, ink_fraction: f
     return uv_out, area, mass, smass, spx, white, noise, code
 
 
+def disc_radius(area_px: np.ndarray, roundness: np.ndarray, disc_margin_px: float) -> np.ndarray:
+    """The disc that holds a blob of a thresholded ``area_px`` and ``roundness`` (minor over major
+    axis): its semi-major axis ``sqrt(area / (pi roundness))`` (area at least 1 px, roundness
+    held to 0.2-1) plus ``disc_margin_px``, pixels."""
+    area = np.maximum(np.asarray(area_px, np.float64), 1.0)
+    roundness = np.clip(np.asarray(roundness, np.float64), 0.2, 1.0)
+    return np.sqrt(area / (np.pi * roundness)) + disc_margin_px
+
+
 def measure_windows(
     gray: np.ndarray, uv_px: np.ndarray, radius_px: np.ndarray, ink_fraction: float, disc_margin_px: float
 ) -> WindowMeasure:

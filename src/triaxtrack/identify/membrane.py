@@ -17,6 +17,8 @@ or a neighbour in its centroid) is unlabelled (:func:`_off_grid`).
 
 from __future__ import annotations
 
+from collections import Counter
+
 import numpy as np
 import pandas as pd
 
@@ -193,14 +195,22 @@ def _bridge(grid, phase, other, other_off, pos, axis, design: KitDesign) -> tupl
 
 BRIDGE_MIN_ROWS = 5  # rows matched across a band to fix a region from its neighbour
 BRIDGE_MAX_INWARD = 2  # columns a facing column may lie in from a region's extreme one
+# a facing column holds at least this share of the rows of the region's fullest column: an outer
+# column broken up beside the band holds a few rows, too few to match across it (a 720p camera
+# of the tilted 420 mm ring took one with 7 rows of 60 once its dots were centred on the raw
+# pixels, where it had held 4, and matched 1 row where the column next in matched 25)
+BRIDGE_MIN_SHARE = 0.5
 
 
 def _facing_column(grid: dict, extreme: int, inward: int) -> int | None:
     """The column nearest a band, from ``extreme`` (the region's outermost) ``inward`` (+1 or -1),
-    whose rows have ``BRIDGE_MIN_ROWS`` dots beside the next column in; None if none within
+    whose rows have dots beside the next column in: at least ``BRIDGE_MIN_ROWS`` of them and
+    ``BRIDGE_MIN_SHARE`` of the region's fullest column's rows; None if none within
     ``BRIDGE_MAX_INWARD`` columns."""
+    fullest = max(Counter(j for _, j in grid).values(), default=0)
     for j in range(extreme, extreme + inward * (BRIDGE_MAX_INWARD + 1), inward):
-        if sum((i, j + inward) in grid for i, jj in grid if jj == j) >= BRIDGE_MIN_ROWS:
+        rows = sum((i, j + inward) in grid for i, jj in grid if jj == j)
+        if rows >= max(BRIDGE_MIN_ROWS, BRIDGE_MIN_SHARE * fullest):
             return j
     return None
 
