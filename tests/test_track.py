@@ -5,6 +5,7 @@ import cv2
 import numpy as np
 import pandas as pd
 import pytest
+from test_image_quality import _dots  # exact discs, blurred and noised
 
 from triaxtrack.completion import Candidates, DotGrid, grid_candidates
 from triaxtrack.detect import detect_blobs
@@ -277,6 +278,21 @@ def test_merged_and_lost_blobs_are_flagged():
     assert list(reason) == ["merged", "", "lost", "edge"]
     assert np.allclose(uv[1], [40, 40], atol=0.05)
     assert 25 <= area[1] <= 37 and mass[1] > 25 * 150
+
+
+@pytest.mark.parametrize("pitch", [5.5, 6.0])
+def test_touching_dots_are_measured_apart_and_a_dot_touching_an_edge_is_merged(pitch):
+    """Two dots (radius 2.5 px) ``pitch`` apart, blurred by 1 px (one blob), both targets: each is
+    measured on its side of the valley between them, within 0.25 px of its centre (0.06-0.22 px
+    here: the other's fringe on its side); a dot beside a dark bar that is no target stays
+    'merged'. (5 px apart the valley is 12 grey levels deep at a noise of 3-4: one blob.)"""
+    centres = np.array([[20.3, 20.2], [20.3, 20.2 + pitch], [50.2, 40.1]])
+    img = _dots(centres, 2.5, shape=(80, 1280), blur=1.0, noise=3.0, seed=1).astype(np.float32)
+    img[30:50, 53:60] = np.minimum(img[30:50, 53:60], 40)  # a dark bar beside the third dot
+    img = np.clip(np.round(cv2.GaussianBlur(img, (0, 0), 0.5)), 0, 255).astype(np.uint8)
+    m = measure_targets(img, centres + [[0.3, -0.2], [-0.2, 0.3], [0.1, 0.1]], np.full(3, 3.5))
+    assert list(m.reason) == ["", "", "merged"]
+    assert (np.hypot(*(m.uv[:2] - centres[:2]).T) < 0.25).all()
 
 
 @pytest.mark.parametrize("radius", [9.5, 33.5])  # a window of 25 and of 73 columns (the two growings)

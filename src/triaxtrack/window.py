@@ -14,6 +14,12 @@ In a square window around each prediction (half-width the disc's radius rounded 
   number of grey levels;
 * the blob is the ink at the mean-shifted centre grown through connected ink within its disc;
   its **centroid** is contrast-weighted over the blob grown by one pixel (other ink excluded);
+  it is 'merged' where that growth meets ink beyond doubt outside the disc;
+* **touching targets**: a merged blob is measured again in its cell among the targets given
+  whose discs overlap its own (up to ``TOUCH_MAX``; the power of a point, ``d^2 - r^2``, splits
+  two equal discs halfway): the run-on and the weights count only in the cell, so two dots whose
+  blurred images touch (compressed rows on soft footage) are each measured in their half, and a
+  blob that runs on into ink that is no target's (an edge, a band) stays 'merged';
 * its **normalised mass** ``m = sum(W - grey) / W`` over those pixels (in pixels: the area of an
   equally dark fully black dot) does not change when the whole window is brightened or dimmed;
   its standard uncertainty propagated from the pixel noise and the white level's is
@@ -42,6 +48,7 @@ from typing import NamedTuple
 
 import numba
 import numpy as np
+from scipy.spatial import cKDTree
 
 MEAN_SHIFT_STEPS = 3  # re-centring steps of the disc; motion left after prediction is sub-pixel
 INK_NOISE_K = 3.5  # ink: darker than the white level by at least this x the noise (one-sided
@@ -84,6 +91,12 @@ class WindowMeasure(NamedTuple):
 
 
 REASON_CODES = np.array(["", "edge", "lost", "merged"], dtype=object)  # the kernel's reason codes
+MERGED = 3  # the code of 'merged'
+# A blob that runs on beyond its disc is measured again in its cell among the targets whose
+# discs overlap its own (at most this many, the nearest): touching dots are cut apart halfway
+TOUCH_MAX = 6
+VALLEY_STEP_PX = 0.25  # the line between two touching targets is sampled this often for its valley
+BRUTE_FORCE_PAIRS = 100_000  # merged x targets up to which their distances are all worked out
 _U = np.uint64  # unsigned indices: numba leaves out the wrap-around of negative indices, which
 # would keep the loops from running on whole vectors
 
@@ -232,10 +245,11 @@ def _flat_rows(c: float, reach: float, stride: int) -> range:
 
 # the masks of a window (rows of a (planes, entries) array; padded: :func:`_geometry`): ink,
 # ink beyond doubt, the disc, where the blob may grow (ink in the disc), the seeds, the blob,
-# its growth by one pixel and by GROW_PX (and a spare), the other ink and its 3x3 growth, and
-# the window's pixels
-_INK, _SURE, _DISC, _ROOM, _SEED, _BLOB, _NEAR, _GROWN, _OTHER, _FRINGE, _REAL = range(11)
-_PLANES = 11
+# its growth by one pixel and by GROW_PX (and a spare), the other ink and its 3x3 growth, the
+# window's pixels, and the target's cell (nearer its own disc than any touching target's:
+# :func:`_cell`; the whole window when none touches)
+_INK, _SURE, _DISC, _ROOM, _SEED, _BLOB, _NEAR, _GROWN, _OTHER, _FRINGE, _REAL, _CELL = range(12)
+_PLANES = 12
 
 
 @numba.njit(cache=True)
@@ -360,19 +374,19 @@ def _masks(wins: np.ndarray, at: int, xy: np.ndarray, sure_level: int, cx: float
 def _blob_sums(wins: np.ndarray, at: int, off: np.ndarray, m: np.ndarray, grown: int, entries: range,
                white: float) -> tuple:  # fmt: skip
     """From the masks of :func:`_masks` (the blob grown by ``GROW_PX`` in mask ``grown``, within
-    ``entries``): whether the blob's 1-pixel growth meets ink beyond doubt outside the disc (it
-    runs on: merged), its pixel count, and over the weighted pixels (the grown blob less the other
-    ink's fringe): the summed contrast ``w = W - v`` (0 where v >= W), the contrast-weighted
-    centroid (window-relative), the pixel count and the sums of the pixels' offsets from the
-    centroid and of their squares per axis."""
-    near, sure, disc, blob, fringe = m[_NEAR], m[_SURE], m[_DISC], m[_BLOB], m[_FRINGE]
+    ``entries``): whether the blob's 1-pixel growth meets ink beyond doubt outside the disc in the
+    target's cell (it runs on: merged), its pixel count, and over the weighted pixels (the grown
+    blob in the target's cell, less the other ink's fringe): the summed contrast ``w = W - v``
+    (0 where v >= W), the contrast-weighted centroid (window-relative), the pixel count and the
+    sums of the pixels' offsets from the centroid and of their squares per axis."""
+    near, sure, disc, blob, fringe, cell = m[_NEAR], m[_SURE], m[_DISC], m[_BLOB], m[_FRINGE], m[_CELL]
     weighted = m[grown]
     runs = area = cnt = sv = sx = svx = sy = svy = npx = ax = ax2 = ay = ay2 = 0
     below = int(math.ceil(white)) - 1  # the levels with a positive contrast
     for p in entries:
-        runs |= near[p] & sure[p] & ~disc[p]
+        runs |= near[p] & sure[p] & ~disc[p] & cell[p]
         area += blob[p]
-        use = np.int64(weighted[p] & ~fringe[p] & 1)
+        use = np.int64(weighted[p] & ~fringe[p] & cell[p] & 1)
         v = np.int64(wins[at + _U(p)])
         pos, x, y = use * np.int64(v <= below), off[0, p], off[1, p]
         npx, ax, ax2, ay, ay2 = npx + use, ax + use * x, ax2 + use * x * x, ay + use * y, ay2 + use * y * y
@@ -388,14 +402,75 @@ def _blob_sums(wins: np.ndarray, at: int, off: np.ndarray, m: np.ndarray, grown:
 
 
 @numba.njit(cache=True)
+def _grey_at(wins: np.ndarray, at: int, stride: int, x: float, y: float) -> float:
+    """The grey level of a (padded) window at ``wins[at:]`` at (x, y) relative to its centre,
+    interpolated bilinearly between its pixels; -1 outside them."""
+    n = stride - 2
+    h = n // 2
+    fx, fy = x + h, y + h
+    j, i = int(math.floor(fx)), int(math.floor(fy))
+    if j < 0 or i < 0 or j + 1 > n - 1 or i + 1 > n - 1:
+        return -1.0
+    a, b = fx - j, fy - i
+    q = at + _U((i + 1) * stride + j + 1)
+    v00, v01 = float(wins[q]), float(wins[q + _U(1)])
+    v10, v11 = float(wins[q + _U(stride)]), float(wins[q + _U(stride + 1)])
+    return (1 - b) * ((1 - a) * v00 + a * v01) + b * ((1 - a) * v10 + a * v11)
+
+
+@numba.njit(cache=True)
+def _cell(m: np.ndarray, wins: np.ndarray, at: int, xy: np.ndarray, cx: float, cy: float, nb: np.ndarray,
+          ox: float, oy: float, noise: float) -> None:  # fmt: skip
+    """Mask ``_CELL``: the window's entries on the target's side of the valley between it (at
+    (cx, cy)) and each touching target in ``nb`` ((k, 3): centre, less (``ox``, ``oy``) the
+    window's centre, and radius; NaN rows: none). The valley is the lightest point of the line
+    between the two centres, sampled every ``VALLEY_STEP_PX``; it divides them (the line through
+    it across theirs) where it is lighter by ``INK_NOISE_K`` x ``noise`` than the darkest point
+    on either side of it, so two dots apart (a saddle between them), not one dot, an edge or a
+    neighbour predicted onto this dot's own ink."""
+    size = xy.shape[1]
+    stride = int(round(math.sqrt(size)))
+    cell = m[_CELL]
+    cell[:size] = 1
+    for k in range(nb.shape[0]):
+        if not np.isfinite(nb[k, 2]):
+            continue
+        dx, dy = nb[k, 0] - ox - cx, nb[k, 1] - oy - cy
+        length = math.sqrt(dx * dx + dy * dy)
+        steps = int(length / VALLEY_STEP_PX)
+        if steps < 2:
+            continue
+        top, at_top, dark_before, dark_after = -1.0, -1, 256.0, 256.0
+        for s in range(steps + 1):
+            v = _grey_at(wins, at, stride, cx + dx * s / steps, cy + dy * s / steps)
+            if v < 0:
+                break
+            if v > top:  # the lightest so far: what came before it is on this side
+                if at_top >= 0:
+                    dark_before = min(dark_before, dark_after, top)
+                top, at_top, dark_after = v, s, 256.0
+            else:
+                dark_after = min(dark_after, v)
+        if at_top <= 0 or top - max(dark_before, dark_after) < INK_NOISE_K * noise:
+            continue  # no valley (or nothing seen beyond it): no division
+        vx, vy = cx + dx * at_top / steps, cy + dy * at_top / steps
+        for p in range(size):
+            if (xy[0, p] - vx) * dx + (xy[1, p] - vy) * dy > 0:
+                cell[p] = 0
+
+
+@numba.njit(cache=True)
 def _measure_one(wins: np.ndarray, at: int, xy: np.ndarray, off: np.ndarray, cx: float, cy: float, rad: float,
                  white: float, noise: float, s_white: float, ink_fraction: float, disc_margin: float,
-                 m: np.ndarray, rows: np.ndarray) -> tuple:  # fmt: skip
+                 m: np.ndarray, rows: np.ndarray, nb: np.ndarray, ox: float, oy: float) -> tuple:  # fmt: skip
     """One target's blob in its (padded) window at ``wins[at:]`` from the prediction (cx, cy)
-    relative to the window centre (module docstring): ``(centroid u, v relative to the window
-    centre, area, mass, sigma_mass, sigma_px, reason code)``."""
+    relative to the window centre (``ox``, ``oy``; module docstring), weighted and run on in its
+    cell among the touching targets ``nb`` (:func:`_cell`; none: the whole window):
+    ``(centroid u, v relative to the window centre, area, mass, sigma_mass, sigma_px, reason
+    code)``."""
     level = max(INK_NOISE_K * noise, ink_fraction * white)
     darkest, ink = _last_darker(white, level), m[_INK]
+    _cell(m, wins, at, xy, cx, cy, nb, ox, oy, noise)
     for p in range(xy.shape[1]):
         ink[p] = wins[at + _U(p)] <= darkest
     cx, cy = _mean_shift(wins, at, m, xy, off, white, cx, cy, (rad - disc_margin) ** 2)
@@ -436,10 +511,12 @@ def _windows(shape: tuple, uv: np.ndarray, rad: np.ndarray) -> tuple[np.ndarray,
 
 
 @numba.njit(cache=True)
-def _measure_all(g: np.ndarray, uv: np.ndarray, rad: np.ndarray, ink_fraction: float,
-                 disc_margin: float) -> tuple:  # fmt: skip
+def _measure_all(g: np.ndarray, uv: np.ndarray, rad: np.ndarray, ink_fraction: float, disc_margin: float,
+                 nb: np.ndarray, frame_noise: float) -> tuple:  # fmt: skip
     """:func:`measure_windows` (the reasons as codes: :data:`REASON_CODES`): the windows' levels
-    first (the frame's noise is their median), then the blobs."""
+    first (the frame's noise is their median, unless ``frame_noise`` > 0 gives it), then the
+    blobs, each in its cell among its touching targets ``nb`` ((N, k, 3): centre, radius; NaN
+    rows: none; k may be 0). Also returns the frame's noise."""
     n = len(uv)
     half, centre, code = _windows(g.shape, uv, rad)
     sel = np.nonzero(code == 0)[0]
@@ -457,9 +534,10 @@ def _measure_all(g: np.ndarray, uv: np.ndarray, rad: np.ndarray, ink_fraction: f
         white[t], noise[t], s_white[t] = _levels(hist, sizes[k])
     out = np.full((n, 2), np.nan), np.zeros(n), np.zeros(n), np.zeros(n), np.full(n, np.nan)
     if m == 0:
-        return out + (white, noise, code)
+        return out + (white, noise, code, frame_noise)
     uv_out, area, mass, smass, spx = out
-    frame_noise = max(np.median(noise[sel]), QUANTISATION_NOISE)
+    if not frame_noise > 0:
+        frame_noise = max(np.median(noise[sel]), QUANTISATION_NOISE)
     # the codec flattens some windows' white (their spread reads below the noise) and the dark
     # beyond an edge fills others' (far above it): each is held to the frame's noise
     noise[sel] = np.minimum(np.maximum(noise[sel], frame_noise), STRUCTURE_K * frame_noise)
@@ -474,10 +552,10 @@ def _measure_all(g: np.ndarray, uv: np.ndarray, rad: np.ndarray, ink_fraction: f
         cx, cy = uv[t, 0] - centre[t, 0], uv[t, 1] - centre[t, 1]  # the prediction, window-relative
         cu, cv, area[t], mass[t], smass[t], sigma, code[t] = _measure_one(
             wins, _U(start[k]), xy, off, cx, cy, rad[t], white[t], noise[t], s_white[t], ink_fraction,
-            disc_margin, masks, rows)  # fmt: skip
+            disc_margin, masks, rows, nb[t], float(centre[t, 0]), float(centre[t, 1]))  # fmt: skip
         if code[t] == 0:
             uv_out[t, 0], uv_out[t, 1], spx[t] = cu + centre[t, 0], cv + centre[t, 1], sigma
-    return uv_out, area, mass, smass, spx, white, noise, code
+    return uv_out, area, mass, smass, spx, white, noise, code, frame_noise
 
 
 def disc_radius(area_px: np.ndarray, roundness: np.ndarray, disc_margin_px: float) -> np.ndarray:
@@ -506,7 +584,53 @@ def measure_windows(
     g.flags.writeable = False  # as decoded frames are: one compiled kernel for both
     uv = np.ascontiguousarray(uv_px, np.float64).reshape(-1, 2)
     rad = np.ascontiguousarray(radius_px, np.float64).reshape(-1)
-    uv_out, area, mass, smass, spx, white, noise, code = _measure_all(
-        g, uv, rad, float(ink_fraction), float(disc_margin_px)
-    )
-    return WindowMeasure(uv_out, area, mass, smass, spx, white, noise, code)
+    ink_fraction, disc_margin_px = float(ink_fraction), float(disc_margin_px)
+    none = np.empty((len(uv), 0, 3))  # no touching targets
+    *first, frame_noise = _measure_all(g, uv, rad, ink_fraction, disc_margin_px, none, 0.0)
+    meas = WindowMeasure(*first)
+    merged = np.nonzero(meas.code == MERGED)[0]
+    if len(merged) == 0:
+        return meas
+    nb = _touching(uv, rad, merged)
+    again = merged[np.isfinite(nb[:, :, 2]).any(axis=1)]
+    if len(again) == 0:
+        return meas
+    nb = nb[np.isfinite(nb[:, :, 2]).any(axis=1)]
+    *cut, _ = _measure_all(g, uv[again], rad[again], ink_fraction, disc_margin_px, nb, frame_noise)
+    clear = WindowMeasure(*cut).code == 0
+    return WindowMeasure(*(_put(a, again[clear], b[clear]) for a, b in zip(meas, cut, strict=True)))
+
+
+def _put(a: np.ndarray, rows: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """A copy of ``a`` with ``values`` in ``rows``."""
+    out = a.copy()
+    out[rows] = values
+    return out
+
+
+def _touching(uv: np.ndarray, rad: np.ndarray, which: np.ndarray) -> np.ndarray:
+    """(len(which), TOUCH_MAX, 3): for each target ``which``, the centres and radii of the other
+    targets whose discs overlap its own (``uv`` (N, 2), ``rad`` (N,)), nearest first; NaN rows
+    where there are fewer."""
+    out = np.full((len(which), TOUCH_MAX, 3), np.nan)
+    live = np.nonzero(np.isfinite(uv).all(axis=1) & np.isfinite(rad))[0]
+    if len(live) < 2:
+        return out
+    k = min(TOUCH_MAX + 1, len(live))
+    if len(which) * len(live) <= BRUTE_FORCE_PAIRS:  # a few merged: no tree over every target
+        du = uv[which, 0, None] - uv[None, live, 0]
+        dv = uv[which, 1, None] - uv[None, live, 1]
+        d2 = du * du + dv * dv
+        j = np.argpartition(d2, k - 1, axis=1)[:, :k]  # the k nearest (k <= len(live)), then in order
+        j = np.take_along_axis(j, np.argsort(np.take_along_axis(d2, j, 1), axis=1, kind="stable"), 1)
+        d = np.sqrt(np.take_along_axis(d2, j, 1))
+    else:
+        d, j = cKDTree(uv[live]).query(uv[which], k=k)
+    d, j = d.reshape(len(which), k), live[np.minimum(j, len(live) - 1)].reshape(len(which), k)
+    touch = (d < rad[which, None] + rad[j]) & (j != which[:, None]) & (d > 0)
+    order = np.argsort(~touch, axis=1, kind="stable")[:, :TOUCH_MAX]  # the touching ones first
+    j, touch = np.take_along_axis(j, order, 1), np.take_along_axis(touch, order, 1)
+    width = j.shape[1]
+    out[:, :width, :2] = np.where(touch[:, :, None], uv[j], np.nan)
+    out[:, :width, 2] = np.where(touch, rad[j], np.nan)
+    return out
