@@ -11,9 +11,9 @@ says ``undist`` (ideal pinhole pixels of the same camera matrix, see :func:`undi
 * Centroids are contrast-weighted (``background - grey``) over the blob grown by one pixel, so
   partly covered edge pixels count. On soft footage, where the ink mask is thresholded smoothed,
   the dots' centroids are then measured on the raw pixels in each dot's own window, as the
-  tracker measures them (:func:`detect_blobs`). A dot of a stripe that runs along a dark edge can be
-  re-centred against the background measured in the stripe's gaps, which holds the edge's
-  blurred fringe too (:func:`gap_background_centroids`).
+  tracker measures them (:func:`detect_blobs`). A dot of a stripe that runs along a dark edge
+  can be re-centred against the background measured in the stripe's gaps, which holds the
+  edge's blurred fringe too (:func:`gap_background_centroids`).
 * ``contrast`` is the blob's darkest depth below the background; ``background`` the local white
   level at its centre (the surface it is printed on: label, band, membrane).
 * Shape from second moments: ``major_px``/``minor_px`` are the full axes of the ellipse with the
@@ -275,9 +275,10 @@ def _window_centroids(g: np.ndarray, blobs: pd.DataFrame, p: DetectParams) -> pd
     """Soft footage: the dots' centroids measured again on the raw pixels, each in its own window
     as the tracker measures it (:func:`triaxtrack.window.measure_windows`: the ink at the raw
     contrast threshold, in a disc of the blob's semi-major axis plus ``WINDOW_MARGIN_PX``
-    re-centred on it, against the window's own white level), where that finds the blob clear of
-    other ink and within half its minor axis of where the smoothed mask put it; elsewhere (touching
-    another blob, an edge) the smoothed mask's centroid stays. Other columns unchanged."""
+    re-centred on it, against the window's own white level; a dot touching another is measured on
+    its side of the valley between them), where that finds the blob clear and within half its
+    minor axis of where the smoothed mask put it; elsewhere (an edge, no valley) the smoothed
+    mask's centroid stays. Other columns unchanged."""
     from triaxtrack.window import disc_radius, measure_windows
 
     dots = np.nonzero(dot_mask(blobs, p))[0]

@@ -28,7 +28,7 @@ from there each ID is carried forward without detecting or identifying the frame
    * ``lost``: no ink in the disc (occluded, out of view; or a window too dark to show a dot);
    * ``merged``: the blob runs on beyond its disc (it touches another dark feature; a dot that
      touches another target, as compressed rows do on soft footage, is measured apart from it,
-     each in its half: :mod:`triaxtrack.window`);
+     each on its side of the valley between them: :mod:`triaxtrack.window`);
    * ``shape``: its normalised mass (the summed contrast over the white level: the dot's area
      times its darkness, without the whole-pixel jumps of a thresholded area, unchanged by a
      uniform change of light) changed since it was last seen by more than the larger of

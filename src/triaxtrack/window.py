@@ -16,10 +16,12 @@ In a square window around each prediction (half-width the disc's radius rounded 
   its **centroid** is contrast-weighted over the blob grown by one pixel (other ink excluded);
   it is 'merged' where that growth meets ink beyond doubt outside the disc;
 * **touching targets**: a merged blob is measured again in its cell among the targets given
-  whose discs overlap its own (up to ``TOUCH_MAX``; the power of a point, ``d^2 - r^2``, splits
-  two equal discs halfway): the run-on and the weights count only in the cell, so two dots whose
-  blurred images touch (compressed rows on soft footage) are each measured in their half, and a
-  blob that runs on into ink that is no target's (an edge, a band) stays 'merged';
+  whose discs overlap its own (up to ``TOUCH_MAX``): the side of the valley between it and each
+  of them, the line across theirs through the lightest point between the two centres, where
+  that point is lighter than the darkest on both sides by ``INK_NOISE_K`` x the noise (a saddle:
+  two dots). The run-on and the weights count only in the cell, so two dots whose blurred images
+  touch (compressed rows on soft footage) are each measured on their side, and a blob that runs
+  on into ink that is no target's (an edge, a band), or with no valley, stays 'merged';
 * its **normalised mass** ``m = sum(W - grey) / W`` over those pixels (in pixels: the area of an
   equally dark fully black dot) does not change when the whole window is brightened or dimmed;
   its standard uncertainty propagated from the pixel noise and the white level's is
@@ -93,7 +95,7 @@ class WindowMeasure(NamedTuple):
 REASON_CODES = np.array(["", "edge", "lost", "merged"], dtype=object)  # the kernel's reason codes
 MERGED = 3  # the code of 'merged'
 # A blob that runs on beyond its disc is measured again in its cell among the targets whose
-# discs overlap its own (at most this many, the nearest): touching dots are cut apart halfway
+# discs overlap its own (at most this many, the nearest): touching dots are cut at their valley
 TOUCH_MAX = 6
 VALLEY_STEP_PX = 0.25  # the line between two touching targets is sampled this often for its valley
 BRUTE_FORCE_PAIRS = 100_000  # merged x targets up to which their distances are all worked out
@@ -246,7 +248,7 @@ def _flat_rows(c: float, reach: float, stride: int) -> range:
 # the masks of a window (rows of a (planes, entries) array; padded: :func:`_geometry`): ink,
 # ink beyond doubt, the disc, where the blob may grow (ink in the disc), the seeds, the blob,
 # its growth by one pixel and by GROW_PX (and a spare), the other ink and its 3x3 growth, the
-# window's pixels, and the target's cell (nearer its own disc than any touching target's:
+# window's pixels, and the target's cell (its side of the valley to each touching target:
 # :func:`_cell`; the whole window when none touches)
 _INK, _SURE, _DISC, _ROOM, _SEED, _BLOB, _NEAR, _GROWN, _OTHER, _FRINGE, _REAL, _CELL = range(12)
 _PLANES = 12
