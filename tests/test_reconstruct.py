@@ -381,6 +381,28 @@ def test_a_camera_the_bundle_adjustment_leaves_with_too_few_targets_is_posed_thr
     _check_poses(rec, scene["cameras"])
 
 
+def test_a_camera_left_with_too_few_targets_takes_no_orphan_into_the_bundle(scene):
+    """cam05 labels exactly min_targets wall targets: one of them no other camera sees, and one
+    only cam04 also sees. The first is dropped (seen by one camera), which leaves cam05 too few;
+    the second is then seen by cam04 alone and is dropped too, rather than entering the bundle
+    adjustment with one observation (pycolmap: 'Check failed: point3D.track.Length() > 1')."""
+    wall, water = _wall_and_water(scene)
+    labels, cfg = scene["labels"], SfmConfig()
+    on_wall = labels["id"].isin(wall["id"])
+    seen = labels.loc[on_wall].groupby("id")["camera"].agg(set)
+    ids = seen[seen.map(lambda c: {"cam04", "cam05"} <= c)].index[: cfg.min_targets].to_numpy()
+    lone, pair = ids[0], ids[1]
+    keep = ~on_wall | (labels["camera"] != "cam05") | labels["id"].isin(ids)
+    keep &= ~(labels["id"].eq(lone) & labels["camera"].ne("cam05"))
+    keep &= ~(labels["id"].eq(pair) & ~labels["camera"].isin(["cam04", "cam05"]))
+    cell = scene["cell"]
+    rec = reconstruct_cell(scene["intrinsics"], labels[keep], wall, SfmConfig(), water=water, cell=cell)
+    assert rec.posed_from["cam05"]["pose_from"] == "water" and not rec.dropped
+    res = rec.residuals.set_index(["camera", "id"])
+    assert not res.loc[("cam04", pair), "used"] and res.loc[("cam04", pair), "reason"] == "seen by one camera"
+    _check_poses(rec, scene["cameras"])
+
+
 def test_cameras_that_share_too_few_wall_targets_are_posed_through_it(scene):
     """Two cameras each pose from their own strip of the wall, with no target in common (close
     cameras far apart): no bundle to adjust, so every camera is posed through the wall against

@@ -226,15 +226,19 @@ def _air_reconstruction(
     used = obs["inlier"].to_numpy().copy()
     reason = np.where(used, "", "PnP outlier").astype(object)
     for rounds in range(1, MAX_BA_ROUNDS + 1):
-        counts = obs.loc[used, "id"].value_counts()
-        multi = obs["id"].map(counts).fillna(0).to_numpy() >= 2
-        reason[used & ~multi] = "seen by one camera"
-        used &= multi
-        # a camera left with too few targets is not posed by them (it is posed through the wall)
-        per_cam = obs.loc[used, "camera"].value_counts()
-        few = obs["camera"].map(per_cam).fillna(0).to_numpy() < cfg.min_targets
-        reason[used & few] = f"camera left with fewer than {cfg.min_targets} targets"
-        used &= ~few
+        while True:  # until every target left is seen twice and every camera left sees enough
+            counts = obs.loc[used, "id"].value_counts()
+            multi = obs["id"].map(counts).fillna(0).to_numpy() >= 2
+            reason[used & ~multi] = "seen by one camera"
+            used &= multi
+            # a camera left with too few targets is not posed by them (it is posed through the
+            # wall); the targets it shared with one other camera are then seen by one
+            per_cam = obs.loc[used, "camera"].value_counts()
+            few = used & (obs["camera"].map(per_cam).fillna(0).to_numpy() < cfg.min_targets)
+            if not few.any():
+                break
+            reason[few] = f"camera left with fewer than {cfg.min_targets} targets"
+            used &= ~few
         posed = {n: c for n, c in posed.items() if per_cam.get(n, 0) >= cfg.min_targets}
         sel = obs[used]
         if len(posed) < 2 or sel["id"].nunique() < cfg.min_targets:
