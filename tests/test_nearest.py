@@ -63,3 +63,26 @@ def test_crowded_marks_both_of_each_close_pair():
     expected[nearest[close, 1]] = True
     assert expected.any() and (crowded(points, reach) == expected).all()
     assert not crowded(points[:1], reach[:1]).any() and crowded(np.zeros((0, 2)), np.zeros(0)).shape == (0,)
+
+
+def test_overlapping_discs_are_those_of_the_nearest_that_overlap_with_or_without_a_tree():
+    import triaxtrack.nearest as nearest
+
+    rng = np.random.default_rng(4)
+    uv = rng.uniform(0, 60, (300, 2))
+    uv[7] = np.nan
+    rad = rng.uniform(1, 4, 300)
+    which = np.array([0, 3, 7 + 1, 150, 299])
+    got = nearest.overlapping_discs(uv, rad, which, 6)
+    for row, i in enumerate(which):  # brute force, by hand
+        d = np.hypot(*(uv - uv[i]).T)
+        d[i] = np.nan  # not itself
+        near = np.argsort(np.where(np.isfinite(d), d, np.inf), kind="stable")[:6]  # the 6 nearest others
+        hit = near[d[near] < rad[i] + rad[near]]
+        assert np.array_equal(got[row, : len(hit), :2], uv[hit]) and np.isnan(got[row, len(hit) :]).all()
+    tree = nearest.BRUTE_FORCE_PAIRS
+    try:
+        nearest.BRUTE_FORCE_PAIRS = 0
+        assert np.array_equal(nearest.overlapping_discs(uv, rad, which, 6), got, equal_nan=True)
+    finally:
+        nearest.BRUTE_FORCE_PAIRS = tree

@@ -50,7 +50,8 @@ from typing import NamedTuple
 
 import numba
 import numpy as np
-from scipy.spatial import cKDTree
+
+from triaxtrack.nearest import overlapping_discs
 
 MEAN_SHIFT_STEPS = 3  # re-centring steps of the disc; motion left after prediction is sub-pixel
 INK_NOISE_K = 3.5  # ink: darker than the white level by at least this x the noise (one-sided
@@ -98,7 +99,6 @@ MERGED = 3  # the code of 'merged'
 # discs overlap its own (at most this many, the nearest): touching dots are cut at their valley
 TOUCH_MAX = 6
 VALLEY_STEP_PX = 0.25  # the line between two touching targets is sampled this often for its valley
-BRUTE_FORCE_PAIRS = 100_000  # merged x targets up to which their distances are all worked out
 _U = np.uint64  # unsigned indices: numba leaves out the wrap-around of negative indices, which
 # would keep the loops from running on whole vectors
 
@@ -593,7 +593,7 @@ def measure_windows(
     merged = np.nonzero(meas.code == MERGED)[0]
     if len(merged) == 0:
         return meas
-    nb = _touching(uv, rad, merged)
+    nb = overlapping_discs(uv, rad, merged, TOUCH_MAX)
     again = merged[np.isfinite(nb[:, :, 2]).any(axis=1)]
     if len(again) == 0:
         return meas
@@ -607,32 +607,4 @@ def _put(a: np.ndarray, rows: np.ndarray, values: np.ndarray) -> np.ndarray:
     """A copy of ``a`` with ``values`` in ``rows``."""
     out = a.copy()
     out[rows] = values
-    return out
-
-
-def _touching(uv: np.ndarray, rad: np.ndarray, which: np.ndarray) -> np.ndarray:
-    """(len(which), TOUCH_MAX, 3): for each target ``which``, the centres and radii of the other
-    targets whose discs overlap its own (``uv`` (N, 2), ``rad`` (N,)), nearest first; NaN rows
-    where there are fewer."""
-    out = np.full((len(which), TOUCH_MAX, 3), np.nan)
-    live = np.nonzero(np.isfinite(uv).all(axis=1) & np.isfinite(rad))[0]
-    if len(live) < 2:
-        return out
-    k = min(TOUCH_MAX + 1, len(live))
-    if len(which) * len(live) <= BRUTE_FORCE_PAIRS:  # a few merged: no tree over every target
-        du = uv[which, 0, None] - uv[None, live, 0]
-        dv = uv[which, 1, None] - uv[None, live, 1]
-        d2 = du * du + dv * dv
-        j = np.argpartition(d2, k - 1, axis=1)[:, :k]  # the k nearest (k <= len(live)), then in order
-        j = np.take_along_axis(j, np.argsort(np.take_along_axis(d2, j, 1), axis=1, kind="stable"), 1)
-        d = np.sqrt(np.take_along_axis(d2, j, 1))
-    else:
-        d, j = cKDTree(uv[live]).query(uv[which], k=k)
-    d, j = d.reshape(len(which), k), live[np.minimum(j, len(live) - 1)].reshape(len(which), k)
-    touch = (d < rad[which, None] + rad[j]) & (j != which[:, None]) & (d > 0)
-    order = np.argsort(~touch, axis=1, kind="stable")[:, :TOUCH_MAX]  # the touching ones first
-    j, touch = np.take_along_axis(j, order, 1), np.take_along_axis(touch, order, 1)
-    width = j.shape[1]
-    out[:, :width, :2] = np.where(touch[:, :, None], uv[j], np.nan)
-    out[:, :width, 2] = np.where(touch, rad[j], np.nan)
     return out
