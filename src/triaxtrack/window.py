@@ -94,7 +94,7 @@ class WindowMeasure(NamedTuple):
 
 
 REASON_CODES = np.array(["", "edge", "lost", "merged"], dtype=object)  # the kernel's reason codes
-MERGED = 3  # the code of 'merged'
+MERGED = list(REASON_CODES).index("merged")  # its code
 # A blob that runs on beyond its disc is measured again in its cell among the targets whose
 # discs overlap its own (at most this many, the nearest): touching dots are cut at their valley
 TOUCH_MAX = 6
@@ -594,10 +594,10 @@ def measure_windows(
     if len(merged) == 0:
         return meas
     nb = overlapping_discs(uv, rad, merged, TOUCH_MAX)
-    again = merged[np.isfinite(nb[:, :, 2]).any(axis=1)]
+    touching = np.isfinite(nb[:, :, 2]).any(axis=1)
+    again, nb = merged[touching], nb[touching]
     if len(again) == 0:
         return meas
-    nb = nb[np.isfinite(nb[:, :, 2]).any(axis=1)]
     *cut, _ = _measure_all(g, uv[again], rad[again], ink_fraction, disc_margin_px, nb, frame_noise)
     clear = WindowMeasure(*cut).code == 0
     return WindowMeasure(*(_put(a, again[clear], b[clear]) for a, b in zip(meas, cut, strict=True)))
