@@ -18,7 +18,7 @@ from triaxtrack.kit import design_points
 from triaxtrack.optics import Camera, cell_optics, project_air, project_water
 from triaxtrack.refractive_pose import PoseObservations, image_spread_px, min_spread_px, pose_camera
 from triaxtrack.score_cameras import rotation_angle_deg
-from triaxtrack.sfm import SfmConfig, bundle_adjust, cell_summary, reconstruct_cell
+from triaxtrack.sfm import SfmConfig, bundle_adjust, cell_summary, design_f_statistic, reconstruct_cell
 from triaxtrack.simulate import SimulationConfig, make_cameras
 from triaxtrack.triangulate import (
     TriangulationConfig,
@@ -171,6 +171,53 @@ def test_cameras_within_half_a_millimetre_and_005_degrees(scene, cell_rec):
         truth = scene["cameras"][name]
         assert np.linalg.norm(cam.center - truth.center) < 0.5, name
         assert rotation_angle_deg(cam.R, truth.R) < 0.05, name
+
+
+def test_the_printed_cell_is_held_when_the_images_cannot_tell_it_from_the_adjusted_one(scene, cell_rec):
+    """Exact design, 0.05 px of noise: the F statistic is near 1, the wall targets stay at their
+    printed positions and the cameras come closer to the truth than with the targets adjusted
+    freely (which carry the image noise into the poses)."""
+    table = scene["table"]
+    wall = scene["points"][(table["surface"] == "cell_outer").to_numpy()]
+    assert cell_rec.wall_targets == "design" and 0.8 < cell_rec.design_f < 1.25
+    assert cell_summary(cell_rec)["cell"]["wall_targets"] == "design"
+    got = cell_rec.points.set_index("id").loc[:, ["x_mm", "y_mm", "z_mm"]]
+    np.testing.assert_allclose(np.hypot(got["x_mm"], got["y_mm"]), scene["cell"].outer_radius, atol=1e-6)
+    free = reconstruct_cell(scene["intrinsics"], scene["labels"], wall, SfmConfig(design_f_max=None))
+    assert free.wall_targets == "adjusted" and np.isnan(free.design_f)
+
+    def centre_error(rec):
+        return np.mean(
+            [np.linalg.norm(c.center - scene["cameras"][n].center) for n, c in rec.cameras.items()]
+        )
+
+    assert centre_error(cell_rec) < 0.8 * centre_error(free)
+
+
+@pytest.mark.parametrize("misprint", ["height", "scatter"])
+def test_a_misprinted_cell_is_adjusted_freely(scene, misprint):
+    """A kit printed 0.1 % too tall, or with 0.03 mm of scatter, is not the cell the images see:
+    the F statistic is large and the targets are adjusted; the cameras stay within tolerance."""
+    table = scene["table"]
+    wall = scene["points"][(table["surface"] == "cell_outer").to_numpy()].copy()
+    z = wall["z_mm"].to_numpy()
+    if misprint == "height":
+        wall["z_mm"] = z.mean() + (z - z.mean()) * 1.001
+    else:
+        rng = np.random.default_rng(11)
+        wall["z_mm"] = z + rng.normal(0, 0.03, len(z))
+    rec = reconstruct_cell(scene["intrinsics"], scene["labels"], wall, SfmConfig())
+    assert rec.wall_targets == "adjusted" and rec.design_f > 3
+    for name, cam in rec.cameras.items():
+        assert np.linalg.norm(cam.center - scene["cameras"][name].center) < 0.5, name
+
+
+def test_design_f_statistic():
+    # 989 observations, 13 cameras, 300 points: 1978 - 78 - 900 = 1000 degrees of freedom left to the free fit
+    assert design_f_statistic(1000.0, 1900.0, 989, 300, 13) == pytest.approx(1.0)
+    assert design_f_statistic(1000.0, 3700.0, 989, 300, 13) == pytest.approx(3.0)
+    assert np.isnan(design_f_statistic(1000.0, 1900.0, 200, 100, 10))  # dof 40 - 300 < 0: cannot tell
+    assert np.isnan(design_f_statistic(0.0, 1.0, 1000, 300, 13))
 
 
 def test_a_wrong_label_is_dropped_with_its_reason(scene):

@@ -27,7 +27,9 @@ class SfmConfig:
     ``refine_intrinsics``: let the bundle adjustment refine focal lengths, principal
     point and distortion (by default they stay as calibrated); ``eccentricity``: correct the
     cell-wall observations for the eccentricity of the marks' images
-    (:mod:`triaxtrack.eccentricity`).
+    (:mod:`triaxtrack.eccentricity`); ``design_f_max``: hold the cell-wall targets at their
+    printed positions when the F statistic of that against adjusting them freely is at most this
+    (:func:`triaxtrack.sfm.design_f_statistic`; None: always adjust them).
     """
 
     ransac_px: float = 2.0
@@ -36,6 +38,7 @@ class SfmConfig:
     refine_intrinsics: bool = False
     pose_from_water: bool = True
     eccentricity: bool = True
+    design_f_max: float | None = 1.5
 
     @staticmethod
     def from_dict(d: Mapping[str, Any] | None) -> SfmConfig:

@@ -10,7 +10,14 @@ no feature matching:
    (:func:`bundle_adjust`); observations whose residual exceeds ``max_residual_px`` are
    dropped and the adjustment is run again;
 3. the scale and the frame from the design: the similarity that best maps the adjusted targets
-   onto their design positions (:func:`~triaxtrack.cell_frame.similarity_transform`);
+   onto their design positions (:func:`~triaxtrack.cell_frame.similarity_transform`); unless the
+   images cannot tell the printed cell from the adjusted one: the cameras are then adjusted once
+   more to the targets held at their printed positions, and where the F statistic of that
+   against the free adjustment is at most ``design_f_max`` (:func:`design_f_statistic`: 0.9-1.2
+   when the print is exact, 7 for a kit printed 0.05 % too tall, 9 for 0.02 mm of scatter, at
+   1080p), those cameras and positions are kept (``wall_targets``
+   'design'): the free adjustment carries the image noise of a few rays per target into the
+   poses (at 720p it put the cell 0.06 % off scale and the membrane 0.13 mm off);
 4. the cell's outer cylinder fitted to the 3-D targets
    (:func:`~triaxtrack.cell_frame.fit_cylinder`), and every camera and point moved so that its
    axis is the z axis (:func:`~triaxtrack.cell_frame.axis_frame`): the frame in which
@@ -56,6 +63,10 @@ REFERENCE_FRAME = 0  # the frame whose water targets are at their design positio
 # the wall against the kit's cell
 MAX_SCALE_ERROR = 0.01
 MAX_AXIS_TILT_DEG = 1.0
+# The F test of the printed cell against the adjusted one needs the free adjustment to have at
+# least this many degrees of freedom (2 per observation less 6 per camera and 3 per target): with
+# fewer it cannot tell them apart, and the targets are adjusted freely
+MIN_DESIGN_DOF = 100
 NOMINAL_RADIUS_SIGMA_MM = 0.5  # standard error of a nominal outer radius (tube tolerance), the
 # prior of triaxtrack.triangulate.refine_cell when the radius was not fitted in air
 
@@ -74,6 +85,8 @@ class CellReconstruction:
     dropped: dict[str, str]  # camera -> why it was left out
     posed_from: dict[str, dict] = field(default_factory=dict)  # camera -> pose_from, targets, rms_px
     nominal: bool = False  # True: no camera saw enough of the wall; the cell is the kit's design
+    wall_targets: str = "adjusted"  # 'design': held at the printed positions (the F test), or 'adjusted'
+    design_f: float = float("nan")  # the F statistic of the printed positions against the adjusted ones
 
 
 def earliest_observations(labels: pd.DataFrame, ids: np.ndarray, min_targets: int = 1) -> pd.DataFrame:
@@ -143,10 +156,15 @@ def _from_colmap(cam: Camera, colmap_camera, cam_from_world) -> Camera:
 
 
 def bundle_adjust(
-    cameras: dict[str, Camera], observations: pd.DataFrame, points: pd.DataFrame, refine_intrinsics: bool
+    cameras: dict[str, Camera],
+    observations: pd.DataFrame,
+    points: pd.DataFrame,
+    refine_intrinsics: bool,
+    hold_points: bool = False,
 ) -> tuple[dict[str, Camera], pd.DataFrame]:
     """One pycolmap bundle adjustment of camera poses and 3-D points (intrinsics fixed unless
-    ``refine_intrinsics``), in the gauge of the starting poses.
+    ``refine_intrinsics``), in the gauge of the starting poses; with ``hold_points`` the points
+    stay where they are (constant: the cameras are adjusted to them, in their gauge).
 
     ``observations``: rows ``camera, id, u_px, v_px`` (distorted pixels, OpenCV convention);
     ``points``: starting ``id, x_mm, y_mm, z_mm`` of every observed id. Returns the adjusted
@@ -178,7 +196,15 @@ def bundle_adjust(
     opts.refine_principal_point = refine_intrinsics
     opts.refine_extra_params = refine_intrinsics
     opts.print_summary = False
-    pycolmap.bundle_adjustment(rec, opts)
+    if hold_points:
+        config = pycolmap.BundleAdjustmentConfig()
+        for k in image_ids.values():
+            config.add_image(k)
+        for pid in point_ids.values():
+            config.add_constant_point(pid)
+        pycolmap.create_default_bundle_adjuster(opts, config, rec).solve()
+    else:
+        pycolmap.bundle_adjustment(rec, opts)
     out_cams = {
         name: _from_colmap(cameras[name], rec.camera(k), rec.image(k).cam_from_world())
         for name, k in image_ids.items()
@@ -261,12 +287,16 @@ def _air_reconstruction(
         ecc = observation_eccentricity(adj_cams, cam_of, xyz, radius, None)
         obs = obs.assign(u_px=obs["u_px"] - ecc[:, 0], v_px=obs["v_px"] - ecc[:, 1])
         adj_cams, adj_pts = bundle_adjust(posed, obs[used], adj_pts, cfg.refine_intrinsics)
+    printed = design.set_index("id").loc[adj_pts["id"], ["x_mm", "y_mm", "z_mm"]].reset_index()
+    f_stat, held_cams = _design_test(posed, obs[used], adj_cams, adj_pts, printed, cfg)
     s, A, b = similarity_transform(
-        adj_pts[["x_mm", "y_mm", "z_mm"]].to_numpy(),
-        design.set_index("id").loc[adj_pts["id"], ["x_mm", "y_mm", "z_mm"]].to_numpy(),
+        adj_pts[["x_mm", "y_mm", "z_mm"]].to_numpy(), printed[["x_mm", "y_mm", "z_mm"]].to_numpy()
     )
     pts = transform_points(adj_pts, s, A, b)
     cyl = fit_cylinder(pts[["x_mm", "y_mm", "z_mm"]].to_numpy())
+    if held_cams is not None:  # the printed design: the adjusted points' scatter stays the radius's
+        adj_cams, s, A, b, pts = held_cams, 1.0, np.eye(3), np.zeros(3), printed
+        cyl = replace(fit_cylinder(pts[["x_mm", "y_mm", "z_mm"]].to_numpy()), rms_mm=cyl.rms_mm)
     tilt = float(np.degrees(np.arccos(np.clip(abs(cyl.direction[2]), -1.0, 1.0))))
     A2, b2 = axis_frame(cyl)
     pts = transform_points(pts, 1.0, A2, b2)
@@ -289,7 +319,47 @@ def _air_reconstruction(
         }
         for n in cams
     }
-    return CellReconstruction(cams, pts, res.drop(columns="inlier"), cylinder, tilt, s, {}, posed_from)
+    return CellReconstruction(cams, pts, res.drop(columns="inlier"), cylinder, tilt, s, {}, posed_from,
+                              wall_targets="design" if held_cams is not None else "adjusted",
+                              design_f=f_stat)  # fmt: skip
+
+
+def design_f_statistic(free_ss: float, held_ss: float, n_obs: int, n_points: int, n_cameras: int) -> float:
+    """The F statistic of holding ``n_points`` targets at their design positions against adjusting
+    them freely, from the sums of squared reprojection residuals (px^2) of the two adjustments
+    over the same ``n_obs`` observations by ``n_cameras`` posed cameras: the residual variance
+    per coordinate the design takes away over the free adjustment's per degree of freedom
+    (about 1 when the design holds to within the image noise). NaN when the free adjustment has
+    fewer than ``MIN_DESIGN_DOF`` degrees of freedom (too few observations to tell)."""
+    dof = 2 * n_obs - 6 * n_cameras - 3 * n_points
+    if dof < MIN_DESIGN_DOF or n_points == 0 or not free_ss > 0:
+        return float("nan")
+    return float(((held_ss - free_ss) / (3 * n_points)) / (free_ss / dof))
+
+
+def _design_test(
+    posed: dict[str, Camera],
+    obs: pd.DataFrame,
+    adj_cams: dict[str, Camera],
+    adj_pts: pd.DataFrame,
+    printed: pd.DataFrame,
+    cfg: SfmConfig,
+) -> tuple[float, dict[str, Camera] | None]:
+    """The cameras adjusted to the targets held at their ``printed`` positions (from the PnP poses
+    ``posed``), and the F statistic (:func:`design_f_statistic`) of that against the free
+    adjustment (``adj_cams``, ``adj_pts``) over the observations ``obs``. The held cameras are
+    returned (else None) when the statistic is at most ``cfg.design_f_max``: the observations do
+    not tell the printed cell from the adjusted one, and the design's positions are exact where
+    the adjusted ones carry the image noise."""
+    if cfg.design_f_max is None:
+        return float("nan"), None
+    held_cams, _ = bundle_adjust(posed, obs, printed, cfg.refine_intrinsics, hold_points=True)
+    ss = [
+        float(np.nansum(reprojection_residuals(c, obs, p)[["du_px", "dv_px"]].to_numpy() ** 2))
+        for c, p in ((adj_cams, adj_pts), (held_cams, printed))
+    ]
+    f_stat = design_f_statistic(ss[0], ss[1], len(obs), len(adj_pts), len(adj_cams))
+    return f_stat, held_cams if f_stat <= cfg.design_f_max else None
 
 
 def is_printed_cell(rec: CellReconstruction) -> bool:
@@ -493,6 +563,8 @@ def cell_summary(rec: CellReconstruction) -> dict:
             "cylinder_rms_mm": rms,
             "axis_tilt_deg": tilt,
             "targets": n,
+            "wall_targets": None if rec.nominal else rec.wall_targets,
+            "design_f": None if rec.nominal or not np.isfinite(rec.design_f) else rec.design_f,
         },
         "design_scale": rec.scale,
         "mean_reprojection_px": float(err.mean()) if len(err) else None,
