@@ -383,7 +383,8 @@ def _found(ids: np.ndarray, sel: np.ndarray, parts: list) -> Found:
     in candidate order."""
     if not parts:
         e = np.zeros(0)
-        return Found(ids[:0], e, e, WindowMeasure(np.zeros((0, 2)), e, e, e, e, e, e, np.zeros(0, np.int64)))
+        none = WindowMeasure(np.zeros((0, 2)), e, e, e, e, e, e, np.zeros(0, np.int64), np.zeros(0, bool))
+        return Found(ids[:0], e, e, none)
     which = np.concatenate([p[0] for p in parts])
     order = np.argsort(which)
     take = sel[which[order]]

@@ -50,27 +50,37 @@ def _mass_ok(mass: float, smass: float, ref: float, sref: float, fraction: float
 
 @numba.njit(cache=True, error_model="numpy")
 def shape_changed(mass: np.ndarray, smass: np.ndarray, ref: np.ndarray, sref: np.ndarray, last: np.ndarray,
-                  slast: np.ndarray, measured: np.ndarray, blind: np.ndarray, change: float, step: float,
-                  noise_k: float, min_count: int, mad_to_sigma: float) -> np.ndarray:  # fmt: skip
+                  slast: np.ndarray, measured: np.ndarray, blind: np.ndarray, divided: np.ndarray,
+                  change: float, step: float, noise_k: float, min_count: int, mad_to_sigma: float
+                  ) -> np.ndarray:  # fmt: skip
     """(n,) bool: the ``measured`` targets whose normalised mass ``mass`` (standard uncertainty
     ``smass``) changed since the chunk's first frame (``ref``, ``sref``) by more than ``change``,
     or since the frame it was last reported in (``last``, ``slast``; only for a target reported
     in the previous measured frame: ``blind`` 0) by more than ``step``, each or ``noise_k`` of its
     standard uncertainty: the larger of the one propagated from the pixel noise and the robust
     scatter of that change over the targets measured and reported in the previous frame (at least
-    ``min_count``; ``mad_to_sigma`` x their MAD)."""
+    ``min_count``; ``mad_to_sigma`` x their MAD) of its class: measured apart from a touching
+    target (``divided``: its mass ends at a valley line that moves with the noise) or not (where a
+    class has fewer, the scatter over all)."""
     n = len(mass)
     fresh = np.empty(n, np.bool_)
     for i in range(n):
         fresh[i] = measured[i] and blind[i] == 0
-    scatter_ref = _scatter(mass, ref, fresh, min_count, mad_to_sigma)
-    scatter_last = _scatter(mass, last, fresh, min_count, mad_to_sigma)
+    scatter_ref, scatter_last = np.empty(2), np.empty(2)
+    every_ref = _scatter(mass, ref, fresh, min_count, mad_to_sigma)
+    every_last = _scatter(mass, last, fresh, min_count, mad_to_sigma)
+    for c in range(2):
+        of = fresh & (divided == (c == 1))
+        enough = of.sum() >= min_count
+        scatter_ref[c] = _scatter(mass, ref, of, min_count, mad_to_sigma) if enough else every_ref
+        scatter_last[c] = _scatter(mass, last, of, min_count, mad_to_sigma) if enough else every_last
     out = np.zeros(n, np.bool_)
     for i in range(n):
         if not measured[i]:
             continue
-        same = _mass_ok(mass[i], smass[i], ref[i], sref[i], change, scatter_ref, noise_k)
-        moved = _mass_ok(mass[i], smass[i], last[i], slast[i], step, scatter_last, noise_k)
+        c = 1 if divided[i] else 0
+        same = _mass_ok(mass[i], smass[i], ref[i], sref[i], change, scatter_ref[c], noise_k)
+        moved = _mass_ok(mass[i], smass[i], last[i], slast[i], step, scatter_last[c], noise_k)
         out[i] = not (same and (moved or blind[i] > 0))
     return out
 

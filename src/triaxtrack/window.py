@@ -15,6 +15,11 @@ In a square window around each prediction (half-width the disc's radius rounded 
 * the blob is the ink at the mean-shifted centre grown through connected ink within its disc;
   its **centroid** is contrast-weighted over the blob grown by one pixel (other ink excluded);
   it is 'merged' where that growth meets ink beyond doubt outside the disc;
+* **a dot larger than its disc**: a clean blob whose growth meets ink outside its disc is
+  measured again in a disc ``TRUNCATED_GROW_PX`` wider (in its cell among the targets whose
+  discs then overlap), and kept so where the whole blob lies in it, clear of other ink (in its
+  own disc its ink beyond the disc counted as other ink, whose fringe was kept out of the
+  weights: a centroid pulled towards the disc's centre);
 * **touching targets**: a merged blob is measured again in its cell among the targets given
   whose discs overlap its own (up to ``TOUCH_MAX``): the side of the valley between it and each
   of them, the line across theirs through the lightest point between the two centres, where
@@ -52,17 +57,11 @@ import numba
 import numpy as np
 
 from triaxtrack.nearest import overlapping_discs
+from triaxtrack.window_levels import QUANTISATION_NOISE, copy_window, levels
 
 MEAN_SHIFT_STEPS = 3  # re-centring steps of the disc; motion left after prediction is sub-pixel
 INK_NOISE_K = 3.5  # ink: darker than the white level by at least this x the noise (one-sided
 # Gaussian tail 2e-4: a stray ink pixel in one window in about twenty, and it must touch the blob)
-QUANTISATION_NOISE = 1 / np.sqrt(12)  # grey levels: the noise floor of an 8-bit frame
-MAD_TO_SIGMA = 1.4826  # median absolute deviation to standard deviation (normal noise)
-WHITE_BAND = (70.0, 90.0)  # the white level's percentiles (dots cover well under 30 % of a window)
-# the annulus's spread above the white level over the pixel noise: 0.647 for the half of normal
-# noise above its mean (the trimmed white level sits a little above the surface's mean, and the
-# dots' fringes widen the spread: noise 4 reads 5.2 on blurred synthetic dots, an overestimate)
-ABOVE_WHITE_SPREAD = 0.647
 ANNULUS_GAP_PX = 1.0  # the annulus starts this far beyond the disc (the blob's blurred fringe)
 # The centroid's uncertainty propagated from the pixel noise misses the noise of which pixels
 # cross the ink threshold at a blurred edge: on blurred, noisy synthetic dots (5-8 px, blur 1 px,
@@ -86,6 +85,7 @@ class WindowMeasure(NamedTuple):
     white: np.ndarray  # (N,) the window's white level, grey levels
     noise: np.ndarray  # (N,) the window's pixel noise (standard deviation), grey levels
     code: np.ndarray  # (N,) int: the reason's index in REASON_CODES (0: '')
+    divided: np.ndarray  # (N,) bool: measured in its cell, apart from a touching target
 
     @property
     def reason(self) -> np.ndarray:
@@ -99,113 +99,21 @@ MERGED = list(REASON_CODES).index("merged")  # its code
 # discs overlap its own (at most this many, the nearest): touching dots are cut at their valley
 TOUCH_MAX = 6
 VALLEY_STEP_PX = 0.25  # the line between two touching targets is sampled this often for its valley
+# A clean blob whose 1-pixel growth meets ink (not beyond doubt) outside its disc may go on beyond
+# it (a soft dot larger than its disc: its thresholded area at identification undersizes it, and
+# a dot's image grows as the specimen bulges towards a camera): it is measured again, from its
+# centroid, in a disc this much wider (in its cell among the targets whose discs then overlap its
+# own, as touching dots are), up to TRUNCATED_STEPS times, and kept so where its growth there
+# meets no ink outside that disc (the whole dot); else it keeps its first measurement. A blob that
+# runs on into ink beyond doubt stays 'merged' (it may be two dots, one of them not followed).
+# (At 2 % strain, 1080p, a 6 px tall dot followed in a 2.7 px disc was read 1.1 px off, each
+# frame's prediction lagging the last: a swap. Two steps took in a pedestal's face at 10 % strain,
+# 720p, from a dot beside it: labels and tracks 1.1-1.9 px off.)
+TRUNCATED_GROW_PX = 1.0
+TRUNCATED_STEPS = 1  # at most this many times (the blur's reach: a blob larger still is no one dot)
+_TRUNCATED = len(REASON_CODES)  # the kernel's code for such a blob (clean, measured as far as the disc)
 _U = np.uint64  # unsigned indices: numba leaves out the wrap-around of negative indices, which
 # would keep the loops from running on whole vectors
-
-
-@numba.njit(cache=True)
-def _largest(ring: np.ndarray, k: int) -> tuple[int, int]:
-    """The ``k``-th and ``k + 1``-th largest (from 0) grey levels counted in the histogram ``ring``."""
-    seen, first = 0, -1
-    for v in range(255, -1, -1):
-        seen += ring[v]
-        if first < 0 and seen > k:
-            first = v
-        if seen > k + 1:
-            return first, v
-    return max(first, 0), 0
-
-
-@numba.njit(cache=True)
-def _lerp(a: float, b: float, gamma: float) -> float:
-    """numpy.percentile's linear interpolation (the same rounding)."""
-    return b - (b - a) * (1 - gamma) if gamma >= 0.5 else a + (b - a) * gamma
-
-
-@numba.njit(cache=True)
-def _white_band(hist: np.ndarray, count: int) -> tuple[float, float]:
-    """numpy.percentile's (method 'linear') ``WHITE_BAND`` percentiles of the ``count`` >= 2 levels
-    of the window's histograms (:func:`_copy`), in one scan down from 255."""
-    at_lo, at_hi = (count - 1) * (WHITE_BAND[0] / 100.0), (count - 1) * (WHITE_BAND[1] / 100.0)
-    k_hi, k_lo = count - 2 - int(math.floor(at_hi)), count - 2 - int(math.floor(at_lo))  # from the top
-    seen, v_hi, v_hi1, v_lo = 0, -1, -1, -1
-    for v in range(255, -1, -1):
-        seen += hist[v] + hist[v + 256]
-        if v_hi < 0 and seen > k_hi:
-            v_hi = v
-        if v_hi1 < 0 and seen > k_hi + 1:
-            v_hi1 = v
-        if v_lo < 0 and seen > k_lo:
-            v_lo = v
-        if seen > k_lo + 1:  # the sorted levels' floor(at)-th is the (count - 1 - floor(at))-th from the top
-            return (_lerp(v, v_lo, at_lo - math.floor(at_lo)),
-                    _lerp(v_hi1, v_hi, at_hi - math.floor(at_hi)))  # fmt: skip
-    return 0.0, 0.0
-
-
-@numba.njit(cache=True)
-def _inner_columns(ring_r2: float, h: int, inner: np.ndarray) -> None:
-    """``inner[d]`` for d = 0..h: the largest column offset c >= 0 with c^2 + d^2 <= ``ring_r2``
-    (-1: none), from the centre row out (each row's is at most the one before)."""
-    c = int(math.sqrt(ring_r2)) if ring_r2 >= 0 else -1
-    while (c + 1) * (c + 1) <= ring_r2:
-        c += 1
-    for d in range(h + 1):
-        while c >= 0 and c * c + d * d > ring_r2:
-            c -= 1
-        inner[d] = c
-
-
-@numba.njit(cache=True)
-def _copy(
-    g: np.ndarray, y0: int, x0: int, n: int, ring_r2: float, hist: np.ndarray, wins: np.ndarray, at: int,
-    inner: np.ndarray,
-) -> None:  # fmt: skip
-    """Copy the ``n`` x ``n`` window at (``x0``, ``y0``) of the frame ``g`` into ``wins`` from
-    ``at`` (padded: :func:`_geometry`; the padding 255) and count its levels in ``hist`` (768):
-    two interleaved histograms of the window (a run of one level does not wait on itself), then
-    the annulus's (pixels beyond ``ring_r2``, squared distance from the centre; ``inner``:
-    scratch for :func:`_inner_columns`)."""
-    hist[:] = 0
-    h, stride = n // 2, _U(n + 2)
-    _inner_columns(ring_r2, h, inner)
-    for q in range(stride * stride):
-        wins[at + q] = 255
-    for i in range(n):
-        y, row = _U(y0 + i), at + _U(i + 1) * stride + _U(1)
-        for j in range(_U(n)):
-            v = g[y, _U(x0) + j]
-            wins[row + j] = v
-            hist[_U(v) + ((j & _U(1)) << _U(8))] += 1
-        c = inner[abs(i - h)]  # the annulus: the columns farther than this from the centre's
-        left, right = (h - c, h + c + 1) if c >= 0 else (n, n)
-        for j in range(_U(left)):
-            hist[_U(512) + _U(wins[row + j])] += 1
-        for j in range(_U(right), _U(n)):
-            hist[_U(512) + _U(wins[row + j])] += 1
-
-
-@numba.njit(cache=True)
-def _levels(hist: np.ndarray, n: int) -> tuple[float, float, float]:
-    """The white level, noise (before it is held to the frame's) and the white level's
-    uncertainty (module docstring) of an ``n`` x ``n`` window from its histograms (:func:`_copy`):
-    exact percentiles and median."""
-    lo, hi = _white_band(hist, n * n)
-    total = band = 0
-    for v in range(int(math.ceil(lo)), int(math.floor(hi)) + 1):
-        total += v * (hist[v] + hist[v + 256])
-        band += hist[v] + hist[v + 256]
-    white = total / max(band, 1)
-    cnt = 0  # the annulus's levels >= white, and the median of (level - white) over them
-    for v in range(int(math.ceil(white)), 256):
-        cnt += hist[512 + v]
-    noise = 0.0
-    if cnt > 0:
-        hi_v, lo_v = _largest(hist[512:], cnt - 1 - cnt // 2)  # sorted: (cnt - 1) // 2-th, next
-        lo_v = lo_v if cnt % 2 == 0 else hi_v
-        noise = MAD_TO_SIGMA * (((lo_v - white) + (hi_v - white)) / 2) / ABOVE_WHITE_SPREAD
-    noise = max(noise, QUANTISATION_NOISE)
-    return white, noise, noise / math.sqrt(max(band, 3))
 
 
 @numba.njit(cache=True)
@@ -377,16 +285,19 @@ def _blob_sums(wins: np.ndarray, at: int, off: np.ndarray, m: np.ndarray, grown:
                white: float) -> tuple:  # fmt: skip
     """From the masks of :func:`_masks` (the blob grown by ``GROW_PX`` in mask ``grown``, within
     ``entries``): whether the blob's 1-pixel growth meets ink beyond doubt outside the disc in the
-    target's cell (it runs on: merged), its pixel count, and over the weighted pixels (the grown
-    blob in the target's cell, less the other ink's fringe): the summed contrast ``w = W - v``
-    (0 where v >= W), the contrast-weighted centroid (window-relative), the pixel count and the
-    sums of the pixels' offsets from the centroid and of their squares per axis."""
+    target's cell (it runs on: merged), and ink there (it may go on beyond the disc), its pixel
+    count, and over the weighted pixels (the grown blob in the target's cell, less the other
+    ink's fringe): the summed contrast ``w = W - v`` (0 where v >= W), the contrast-weighted
+    centroid (window-relative), the pixel count and the sums of the pixels' offsets from the
+    centroid and of their squares per axis."""
     near, sure, disc, blob, fringe, cell = m[_NEAR], m[_SURE], m[_DISC], m[_BLOB], m[_FRINGE], m[_CELL]
     weighted = m[grown]
-    runs = area = cnt = sv = sx = svx = sy = svy = npx = ax = ax2 = ay = ay2 = 0
+    ink, runs, trunc = m[_INK], 0, 0
+    area = cnt = sv = sx = svx = sy = svy = npx = ax = ax2 = ay = ay2 = 0
     below = int(math.ceil(white)) - 1  # the levels with a positive contrast
     for p in entries:
         runs |= near[p] & sure[p] & ~disc[p] & cell[p]
+        trunc |= near[p] & ink[p] & ~disc[p] & cell[p]
         area += blob[p]
         use = np.int64(weighted[p] & ~fringe[p] & cell[p] & 1)
         v = np.int64(wins[at + _U(p)])
@@ -400,7 +311,7 @@ def _blob_sums(wins: np.ndarray, at: int, off: np.ndarray, m: np.ndarray, grown:
     # offsets from the centroid: sum(x - c) and sum((x - c)^2) from sums of x and x^2
     du, du2 = ax - npx * cu, ax2 - 2 * cu * ax + npx * cu * cu
     dv, dv2 = ay - npx * cv, ay2 - 2 * cv * ay + npx * cv * cv
-    return runs != 0, area, s, cu, cv, npx, du, du2, dv, dv2
+    return runs != 0, trunc != 0, area, s, cu, cv, npx, du, du2, dv, dv2
 
 
 @numba.njit(cache=True)
@@ -478,7 +389,9 @@ def _measure_one(wins: np.ndarray, at: int, xy: np.ndarray, off: np.ndarray, cx:
     cx, cy = _mean_shift(wins, at, m, xy, off, white, cx, cy, (rad - disc_margin) ** 2)
     sure = _last_darker(white, level + INK_NOISE_K * noise)  # ink beyond doubt
     grown, entries = _masks(wins, at, xy, sure, cx, cy, rad, m, rows)
-    runs_on, area, s, cu, cv, npx, du, du2, dv, dv2 = _blob_sums(wins, at, off, m, grown, entries, white)
+    runs_on, trunc, area, s, cu, cv, npx, du, du2, dv, dv2 = _blob_sums(
+        wins, at, off, m, grown, entries, white
+    )
     safe = s if s > 0 else 1.0
     var_u = (noise**2 * du2 + s_white**2 * du**2) / safe**2
     var_v = (noise**2 * dv2 + s_white**2 * dv**2) / safe**2
@@ -486,7 +399,7 @@ def _measure_one(wins: np.ndarray, at: int, xy: np.ndarray, off: np.ndarray, cx:
     m_norm = s / wl
     var_m = npx * noise**2 / wl**2 + ((npx - m_norm) / wl) ** 2 * s_white**2
     area = area if white >= MIN_WHITE else 0
-    code = 2 if area == 0 else (3 if runs_on else 0)
+    code = 2 if area == 0 else (3 if runs_on else (_TRUNCATED if trunc else 0))
     return cu, cv, area, m_norm, math.sqrt(var_m), SIGMA_CALIBRATION * math.sqrt((var_u + var_v) / 2), code
 
 
@@ -532,8 +445,8 @@ def _measure_all(g: np.ndarray, uv: np.ndarray, rad: np.ndarray, ink_fraction: f
     white, noise, s_white = np.full(n, np.nan), np.full(n, np.nan), np.zeros(n)
     for k, t in enumerate(sel):
         y0, x0, ring_r2 = centre[t, 1] - half[t], centre[t, 0] - half[t], (rad[t] + ANNULUS_GAP_PX) ** 2
-        _copy(g, y0, x0, sizes[k], ring_r2, hist, wins, _U(start[k]), inner)
-        white[t], noise[t], s_white[t] = _levels(hist, sizes[k])
+        copy_window(g, y0, x0, sizes[k], ring_r2, hist, wins, _U(start[k]), inner)
+        white[t], noise[t], s_white[t] = levels(hist, sizes[k])
     out = np.full((n, 2), np.nan), np.zeros(n), np.zeros(n), np.zeros(n), np.full(n, np.nan)
     if m == 0:
         return out + (white, noise, code, frame_noise)
@@ -555,7 +468,7 @@ def _measure_all(g: np.ndarray, uv: np.ndarray, rad: np.ndarray, ink_fraction: f
         cu, cv, area[t], mass[t], smass[t], sigma, code[t] = _measure_one(
             wins, _U(start[k]), xy, off, cx, cy, rad[t], white[t], noise[t], s_white[t], ink_fraction,
             disc_margin, masks, rows, nb[t], float(centre[t, 0]), float(centre[t, 1]))  # fmt: skip
-        if code[t] == 0:
+        if code[t] == 0 or code[t] == _TRUNCATED:
             uv_out[t, 0], uv_out[t, 1], spx[t] = cu + centre[t, 0], cv + centre[t, 1], sigma
     return uv_out, area, mass, smass, spx, white, noise, code, frame_noise
 
@@ -588,8 +501,20 @@ def measure_windows(
     rad = np.ascontiguousarray(radius_px, np.float64).reshape(-1)
     ink_fraction, disc_margin_px = float(ink_fraction), float(disc_margin_px)
     none = np.empty((len(uv), 0, 3))  # no touching targets
-    *first, frame_noise = _measure_all(g, uv, rad, ink_fraction, disc_margin_px, none, 0.0)
-    meas = WindowMeasure(*first)
+    meas, frame_noise = _measure(g, uv, rad, ink_fraction, disc_margin_px, none, 0.0, False)
+    grow = np.nonzero(meas.code == _TRUNCATED)[0]
+    wider, at = rad.copy(), meas.uv.copy()
+    for _ in range(TRUNCATED_STEPS):  # a dot larger than its disc: measured in a wider one, in its cell
+        if not len(grow):
+            break
+        wider[grow] += TRUNCATED_GROW_PX
+        nb = overlapping_discs(uv, wider, grow, TOUCH_MAX)
+        wide, _ = _measure(g, at[grow], wider[grow], ink_fraction, disc_margin_px, nb, frame_noise, False)
+        meas = _taken(meas, grow, wide._replace(divided=np.isfinite(nb[:, :, 2]).any(axis=1)), wide.code == 0)
+        again = wide.code == _TRUNCATED
+        at[grow[again]] = wide.uv[again]
+        grow = grow[again]
+    meas = meas._replace(code=np.where(meas.code == _TRUNCATED, 0, meas.code))
     merged = np.nonzero(meas.code == MERGED)[0]
     if len(merged) == 0:
         return meas
@@ -598,9 +523,27 @@ def measure_windows(
     again, nb = merged[touching], nb[touching]
     if len(again) == 0:
         return meas
-    *cut, _ = _measure_all(g, uv[again], rad[again], ink_fraction, disc_margin_px, nb, frame_noise)
-    clear = WindowMeasure(*cut).code == 0
-    return WindowMeasure(*(_put(a, again[clear], b[clear]) for a, b in zip(meas, cut, strict=True)))
+    cut, _ = _measure(g, uv[again], rad[again], ink_fraction, disc_margin_px, nb, frame_noise, True)
+    cut = cut._replace(code=np.where(cut.code == _TRUNCATED, 0, cut.code))  # (in its cell: no wider disc)
+    return _taken(meas, again, cut, cut.code == 0)
+
+
+def _measure(
+    g: np.ndarray, uv: np.ndarray, rad: np.ndarray, ink_fraction: float, disc_margin_px: float,
+    nb: np.ndarray, frame_noise: float, divided: bool,
+) -> tuple[WindowMeasure, float]:  # fmt: skip
+    """:func:`_measure_all` as a :class:`WindowMeasure` (``divided`` for every row), and the
+    frame's noise."""
+    res = _measure_all(g, uv, rad, ink_fraction, disc_margin_px, nb, frame_noise)
+    uv_out, area, mass, smass, spx, white, noise, code, frame_noise = res
+    return WindowMeasure(
+        uv_out, area, mass, smass, spx, white, noise, code, np.full(len(uv), divided)
+    ), float(frame_noise)
+
+
+def _taken(meas: WindowMeasure, rows: np.ndarray, again: WindowMeasure, take: np.ndarray) -> WindowMeasure:
+    """``meas`` with the rows ``rows[take]`` from ``again`` (measured at ``rows``)."""
+    return WindowMeasure(*(_put(a, rows[take], b[take]) for a, b in zip(meas, again, strict=True)))
 
 
 def _put(a: np.ndarray, rows: np.ndarray, values: np.ndarray) -> np.ndarray:
