@@ -43,9 +43,10 @@ Pixels in OpenCV's convention (the centre of the top-left pixel is (0, 0)); grey
 The measurement is a compiled kernel (numba; compiled once and cached on disk, so the first
 call in a new environment takes some seconds): one pass over each window copies it out of the
 frame and counts its levels in 256-bin histograms (the percentiles and the median are exact, as
-numpy's); then per window, on byte masks padded by a pixel all round (a 3x3 dilation is an OR of
-shifts) or on rows packed into words for the blob growing, with the sums of integers where the
-weights are ``W - grey`` (``sum(w x) = W sum(x) - sum(grey x)``).
+numpy's: :mod:`triaxtrack.window_levels`); then per window, on byte masks padded by a pixel
+all round (a 3x3 dilation is an OR of shifts) or on rows packed into words for the blob growing,
+with the sums of integers where the weights are ``W - grey`` (``sum(w x) = W sum(x) -
+sum(grey x)``).
 """
 
 from __future__ import annotations
