@@ -104,14 +104,13 @@ VALLEY_STEP_PX = 0.25  # the line between two touching targets is sampled this o
 # it (a soft dot larger than its disc: its thresholded area at identification undersizes it, and
 # a dot's image grows as the specimen bulges towards a camera): it is measured again, from its
 # centroid, in a disc this much wider (in its cell among the targets whose discs then overlap its
-# own, as touching dots are), up to TRUNCATED_STEPS times, and kept so where its growth there
-# meets no ink outside that disc (the whole dot); else it keeps its first measurement. A blob that
-# runs on into ink beyond doubt stays 'merged' (it may be two dots, one of them not followed).
-# (At 2 % strain, 1080p, a 6 px tall dot followed in a 2.7 px disc was read 1.1 px off, each
-# frame's prediction lagging the last: a swap. Two steps took in a pedestal's face at 10 % strain,
-# 720p, from a dot beside it: labels and tracks 1.1-1.9 px off.)
-TRUNCATED_GROW_PX = 1.0
-TRUNCATED_STEPS = 1  # at most this many times (the blur's reach: a blob larger still is no one dot)
+# own, as touching dots are), and kept so where its growth there meets no ink outside that disc
+# (the whole dot); else it keeps its first measurement. A blob that runs on into ink beyond doubt
+# stays 'merged' (it may be two dots, one of them not followed). (At 2 % strain, 1080p, a 6 px
+# tall dot followed in a 2.7 px disc was read 1.1 px off, each frame's prediction lagging the
+# last: a swap. Two steps took in a pedestal's face at 10 % strain, 720p, from a dot beside it:
+# labels and tracks 1.1-1.9 px off.)
+TRUNCATED_GROW_PX = 1.0  # once (the blur's reach: a blob larger still is no one dot)
 _TRUNCATED = len(REASON_CODES)  # the kernel's code for such a blob (clean, measured as far as the disc)
 _U = np.uint64  # unsigned indices: numba leaves out the wrap-around of negative indices, which
 # would keep the loops from running on whole vectors
@@ -504,17 +503,14 @@ def measure_windows(
     none = np.empty((len(uv), 0, 3))  # no touching targets
     meas, frame_noise = _measure(g, uv, rad, ink_fraction, disc_margin_px, none, 0.0, False)
     grow = np.nonzero(meas.code == _TRUNCATED)[0]
-    wider, at = rad.copy(), meas.uv.copy()
-    for _ in range(TRUNCATED_STEPS):  # a dot larger than its disc: measured in a wider one, in its cell
-        if not len(grow):
-            break
+    if len(grow):  # a dot larger than its disc: measured in a wider one, in its cell
+        wider = rad.copy()
         wider[grow] += TRUNCATED_GROW_PX
         nb = overlapping_discs(uv, wider, grow, TOUCH_MAX)
-        wide, _ = _measure(g, at[grow], wider[grow], ink_fraction, disc_margin_px, nb, frame_noise, False)
+        wide, _ = _measure(
+            g, meas.uv[grow], wider[grow], ink_fraction, disc_margin_px, nb, frame_noise, False
+        )
         meas = _taken(meas, grow, wide._replace(divided=np.isfinite(nb[:, :, 2]).any(axis=1)), wide.code == 0)
-        again = wide.code == _TRUNCATED
-        at[grow[again]] = wide.uv[again]
-        grow = grow[again]
     meas = meas._replace(code=np.where(meas.code == _TRUNCATED, 0, meas.code))
     merged = np.nonzero(meas.code == MERGED)[0]
     if len(merged) == 0:
