@@ -15,9 +15,9 @@ no feature matching:
    more to the targets held at their printed positions, and where the F statistic of that
    against the free adjustment is at most ``design_f_max`` (:func:`design_f_statistic`: 0.9-1.2
    when the print is exact, 7 for a kit printed 0.05 % too tall, 9 for 0.02 mm of scatter, at
-   1080p), those cameras and positions are kept (``wall_targets``
-   'design'): the free adjustment carries the image noise of a few rays per target into the
-   poses (at 720p it put the cell 0.06 % off scale and the membrane 0.13 mm off);
+   1080p), those cameras and positions are kept (``wall_targets`` 'design'): the free
+   adjustment carries the image noise of a few rays per target into the poses (at 720p it put
+   the cell 0.06 % off scale and the membrane 0.13 mm off);
 4. the cell's outer cylinder fitted to the 3-D targets
    (:func:`~triaxtrack.cell_frame.fit_cylinder`), and every camera and point moved so that its
    axis is the z axis (:func:`~triaxtrack.cell_frame.axis_frame`): the frame in which
@@ -331,10 +331,15 @@ def design_f_statistic(free_ss: float, held_ss: float, n_obs: int, n_points: int
     per coordinate the design takes away over the free adjustment's per degree of freedom
     (about 1 when the design holds to within the image noise). NaN when the free adjustment has
     fewer than ``MIN_DESIGN_DOF`` degrees of freedom (too few observations to tell)."""
-    dof = 2 * n_obs - 6 * n_cameras - 3 * n_points
+    dof = _free_dof(n_obs, n_points, n_cameras)
     if dof < MIN_DESIGN_DOF or n_points == 0 or not free_ss > 0:
         return float("nan")
     return float(((held_ss - free_ss) / (3 * n_points)) / (free_ss / dof))
+
+
+def _free_dof(n_obs: int, n_points: int, n_cameras: int) -> int:
+    """Degrees of freedom of a free adjustment: 2 per observation less 6 per camera, 3 per point."""
+    return 2 * n_obs - 6 * n_cameras - 3 * n_points
 
 
 def _design_test(
@@ -351,8 +356,8 @@ def _design_test(
     returned (else None) when the statistic is at most ``cfg.design_f_max``: the observations do
     not tell the printed cell from the adjusted one, and the design's positions are exact where
     the adjusted ones carry the image noise."""
-    if cfg.design_f_max is None:
-        return float("nan"), None
+    if cfg.design_f_max is None or _free_dof(len(obs), len(adj_pts), len(adj_cams)) < MIN_DESIGN_DOF:
+        return float("nan"), None  # (too few observations: no adjustment to hold them in)
     held_cams, _ = bundle_adjust(posed, obs, printed, cfg.refine_intrinsics, hold_points=True)
     ss = [
         float(np.nansum(reprojection_residuals(c, obs, p)[["du_px", "dv_px"]].to_numpy() ** 2))
