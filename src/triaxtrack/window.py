@@ -59,17 +59,22 @@ import numpy as np
 
 from triaxtrack.nearest import overlapping_discs
 from triaxtrack.window_levels import QUANTISATION_NOISE, copy_window, levels
+from triaxtrack.window_rows import (
+    GROW_PX,
+    INK_NOISE_K,
+    MAX_COLUMNS,
+    MEAN_SHIFT_STEPS,
+    PLANES,
+    measure_rows,
+    valley,
+)
 
-MEAN_SHIFT_STEPS = 3  # re-centring steps of the disc; motion left after prediction is sub-pixel
-INK_NOISE_K = 3.5  # ink: darker than the white level by at least this x the noise (one-sided
-# Gaussian tail 2e-4: a stray ink pixel in one window in about twenty, and it must touch the blob)
 ANNULUS_GAP_PX = 1.0  # the annulus starts this far beyond the disc (the blob's blurred fringe)
 # The centroid's uncertainty propagated from the pixel noise misses the noise of which pixels
 # cross the ink threshold at a blurred edge: on blurred, noisy synthetic dots (5-8 px, blur 1 px,
 # noise 4, read as 5.2; tests/test_track.py) the RMS of error / propagated sigma is 1.55, so the
 # propagated sigma is scaled by that
 SIGMA_CALIBRATION = 1.55
-GROW_PX = 1  # the centroid's weights: the blob grown by this (other ink excluded), as detection
 STRUCTURE_K = 3.0  # a window's spread above this x the frame's noise is structure, not noise
 MIN_WHITE = 10.0  # grey levels: a window whose white is darker is under-exposed (a blank or
 # black frame): its noise is clipped at black, so no dot can be told from it ('lost')
@@ -99,7 +104,6 @@ MERGED = list(REASON_CODES).index("merged")  # its code
 # A blob that runs on beyond its disc is measured again in its cell among the targets whose
 # discs overlap its own (at most this many, the nearest): touching dots are cut at their valley
 TOUCH_MAX = 6
-VALLEY_STEP_PX = 0.25  # the line between two touching targets is sampled this often for its valley
 # A clean blob whose 1-pixel growth meets ink (not beyond doubt) outside its disc may go on beyond
 # it (a soft dot larger than its disc: its thresholded area at identification undersizes it, and
 # a dot's image grows as the specimen bulges towards a camera): it is measured again, from its
@@ -214,39 +218,8 @@ def _grow(m: np.ndarray, stride: int) -> tuple[int, int]:
 
 
 @numba.njit(cache=True)
-def _grow_rows(m: np.ndarray, stride: int, rows: np.ndarray) -> tuple[int, int]:
-    """:func:`_grow` on the masks packed one row a word (``rows``: scratch, (3, n + 2) int64), for
-    windows of at most 63 columns: the same, faster; returns the blob's first and last rows."""
-    n = stride - 2
-    cur, nxt, room = rows[0], rows[1], rows[2]
-    cur[0] = cur[n + 1] = nxt[0] = nxt[n + 1] = room[0] = room[n + 1] = 0
-    for i in range(1, n + 1):
-        base, a, b = _U(i * stride + 1), 0, 0
-        for j in range(_U(n)):
-            a |= np.int64(m[_SEED, base + j]) << np.int64(j)
-            b |= np.int64(m[_ROOM, base + j]) << np.int64(j)
-        cur[i], room[i] = a, b
-    start, changed = True, True
-    while changed or start:  # the seeds themselves need not be in the room
-        changed = False
-        for i in range(1, n + 1):
-            v = cur[i - 1] | cur[i] | cur[i + 1]
-            nxt[i] = (v | (v << 1) | (v >> 1)) & room[i]
-            changed |= nxt[i] != cur[i]
-        cur, nxt, start = nxt, cur, False
-    blob, first, last = m[_BLOB], n + 1, 0
-    blob[: stride * stride] = 0
-    for i in range(1, n + 1):
-        if cur[i]:
-            base, w, first, last = _U(i * stride + 1), cur[i], min(first, i), i
-            for j in range(_U(n)):
-                blob[base + j] = (w >> np.int64(j)) & 1
-    return first, last
-
-
-@numba.njit(cache=True)
 def _masks(wins: np.ndarray, at: int, xy: np.ndarray, sure_level: int, cx: float, cy: float, rad: float,
-           m: np.ndarray, rows: np.ndarray) -> tuple[int, range]:  # fmt: skip
+           m: np.ndarray) -> tuple[int, range]:  # fmt: skip
     """The masks (rows of ``m``) of one window from its ink (``_INK``): ink beyond doubt (levels
     <= ``sure_level``), the disc (``rad`` around (cx, cy)), the blob (the ink within sqrt(2) of
     the centre grown through connected (8-neighbour) ink within the disc), its growth by one pixel
@@ -264,7 +237,7 @@ def _masks(wins: np.ndarray, at: int, xy: np.ndarray, sure_level: int, cx: float
         disc[p] = d2 <= r2
         room[p] = ink[p] & disc[p]
         seed[p] = ink[p] & (d2 <= 2.0)
-    first, last = _grow_rows(m, stride, rows) if stride - 2 <= 63 else _grow(m, stride)
+    first, last = _grow(m, stride)
     blob, other = m[_BLOB], m[_OTHER]
     # each growth is right within GROW_PX + 1 rows of the blob's if worked out within 2 GROW_PX + 1
     lo, hi = max(first - 2 * GROW_PX - 1, 1), min(last + 2 * GROW_PX + 1, stride - 2)
@@ -315,23 +288,6 @@ def _blob_sums(wins: np.ndarray, at: int, off: np.ndarray, m: np.ndarray, grown:
 
 
 @numba.njit(cache=True)
-def _grey_at(wins: np.ndarray, at: int, stride: int, x: float, y: float) -> float:
-    """The grey level of a (padded) window at ``wins[at:]`` at (x, y) relative to its centre,
-    interpolated bilinearly between its pixels; -1 outside them."""
-    n = stride - 2
-    h = n // 2
-    fx, fy = x + h, y + h
-    j, i = int(math.floor(fx)), int(math.floor(fy))
-    if j < 0 or i < 0 or j + 1 > n - 1 or i + 1 > n - 1:
-        return -1.0
-    a, b = fx - j, fy - i
-    q = at + _U((i + 1) * stride + j + 1)
-    v00, v01 = float(wins[q]), float(wins[q + _U(1)])
-    v10, v11 = float(wins[q + _U(stride)]), float(wins[q + _U(stride + 1)])
-    return (1 - b) * ((1 - a) * v00 + a * v01) + b * ((1 - a) * v10 + a * v11)
-
-
-@numba.njit(cache=True)
 def _cell(m: np.ndarray, wins: np.ndarray, at: int, xy: np.ndarray, cx: float, cy: float, nb: np.ndarray,
           ox: float, oy: float, noise: float) -> None:  # fmt: skip
     """Mask ``_CELL``: the window's entries on the target's side of the valley between it (at
@@ -346,30 +302,11 @@ def _cell(m: np.ndarray, wins: np.ndarray, at: int, xy: np.ndarray, cx: float, c
     cell = m[_CELL]
     cell[:size] = 1
     for k in range(nb.shape[0]):
-        if not np.isfinite(nb[k, 2]):
-            continue
-        dx, dy = nb[k, 0] - ox - cx, nb[k, 1] - oy - cy
-        length = math.sqrt(dx * dx + dy * dy)
-        steps = int(length / VALLEY_STEP_PX)
-        if steps < 2:
-            continue
-        top, at_top, dark_before, dark_after = -1.0, -1, 256.0, 256.0
-        for s in range(steps + 1):
-            v = _grey_at(wins, at, stride, cx + dx * s / steps, cy + dy * s / steps)
-            if v < 0:
-                break
-            if v > top:  # the lightest so far: what came before it is on this side
-                if at_top >= 0:
-                    dark_before = min(dark_before, dark_after, top)
-                top, at_top, dark_after = v, s, 256.0
-            else:
-                dark_after = min(dark_after, v)
-        if at_top <= 0 or top - max(dark_before, dark_after) < INK_NOISE_K * noise:
-            continue  # no valley (or nothing seen beyond it): no division
-        vx, vy = cx + dx * at_top / steps, cy + dy * at_top / steps
-        for p in range(size):
-            if (xy[0, p] - vx) * dx + (xy[1, p] - vy) * dy > 0:
-                cell[p] = 0
+        divides, vx, vy, dx, dy = valley(wins, at, stride, cx, cy, nb[k], ox, oy, noise)
+        if divides:
+            for p in range(size):
+                if (xy[0, p] - vx) * dx + (xy[1, p] - vy) * dy > 0:
+                    cell[p] = 0
 
 
 @numba.njit(cache=True)
@@ -380,18 +317,26 @@ def _measure_one(wins: np.ndarray, at: int, xy: np.ndarray, off: np.ndarray, cx:
     relative to the window centre (``ox``, ``oy``; module docstring), weighted and run on in its
     cell among the touching targets ``nb`` (:func:`_cell`; none: the whole window):
     ``(centroid u, v relative to the window centre, area, mass, sigma_mass, sigma_px, reason
-    code)``."""
+    code)``. A window of at most ``MAX_COLUMNS`` columns is measured on its rows packed into
+    words (:func:`triaxtrack.window_rows.measure_rows`, scratch ``rows``), a wider one on the
+    byte masks ``m`` (the same results)."""
     level = max(INK_NOISE_K * noise, ink_fraction * white)
-    darkest, ink = _last_darker(white, level), m[_INK]
-    _cell(m, wins, at, xy, cx, cy, nb, ox, oy, noise)
-    for p in range(xy.shape[1]):
-        ink[p] = wins[at + _U(p)] <= darkest
-    cx, cy = _mean_shift(wins, at, m, xy, off, white, cx, cy, (rad - disc_margin) ** 2)
-    sure = _last_darker(white, level + INK_NOISE_K * noise)  # ink beyond doubt
-    grown, entries = _masks(wins, at, xy, sure, cx, cy, rad, m, rows)
-    runs_on, trunc, area, s, cu, cv, npx, du, du2, dv, dv2 = _blob_sums(
-        wins, at, off, m, grown, entries, white
-    )
+    darkest, sure = _last_darker(white, level), _last_darker(white, level + INK_NOISE_K * noise)
+    n, core = int(round(math.sqrt(xy.shape[1]))) - 2, (rad - disc_margin) ** 2
+    if n <= MAX_COLUMNS:
+        runs_on, trunc, area, s, cu, cv, npx, du, du2, dv, dv2 = measure_rows(
+            wins, at, n, darkest, sure, cx, cy, rad, core, white, noise, nb, ox, oy, rows
+        )
+    else:
+        ink = m[_INK]
+        _cell(m, wins, at, xy, cx, cy, nb, ox, oy, noise)
+        for p in range(xy.shape[1]):
+            ink[p] = wins[at + _U(p)] <= darkest
+        cx, cy = _mean_shift(wins, at, m, xy, off, white, cx, cy, core)
+        grown, entries = _masks(wins, at, xy, sure, cx, cy, rad, m)
+        runs_on, trunc, area, s, cu, cv, npx, du, du2, dv, dv2 = _blob_sums(
+            wins, at, off, m, grown, entries, white
+        )
     safe = s if s > 0 else 1.0
     var_u = (noise**2 * du2 + s_white**2 * du**2) / safe**2
     var_v = (noise**2 * dv2 + s_white**2 * dv**2) / safe**2
@@ -457,7 +402,7 @@ def _measure_all(g: np.ndarray, uv: np.ndarray, rad: np.ndarray, ink_fraction: f
     # beyond an edge fills others' (far above it): each is held to the frame's noise
     noise[sel] = np.minimum(np.maximum(noise[sel], frame_noise), STRUCTURE_K * frame_noise)
     masks = np.zeros((_PLANES, (sizes.max() + 2) ** 2), np.uint8)
-    rows = np.zeros((3, sizes.max() + 2), np.int64)
+    words = np.zeros((PLANES, sizes.max() + 2), np.int64)
     xy, off, real = _geometry(0)
     for k in np.argsort(sizes):  # by size: one geometry for each
         t = sel[k]
@@ -467,7 +412,7 @@ def _measure_all(g: np.ndarray, uv: np.ndarray, rad: np.ndarray, ink_fraction: f
         cx, cy = uv[t, 0] - centre[t, 0], uv[t, 1] - centre[t, 1]  # the prediction, window-relative
         cu, cv, area[t], mass[t], smass[t], sigma, code[t] = _measure_one(
             wins, _U(start[k]), xy, off, cx, cy, rad[t], white[t], noise[t], s_white[t], ink_fraction,
-            disc_margin, masks, rows, nb[t], float(centre[t, 0]), float(centre[t, 1]))  # fmt: skip
+            disc_margin, masks, words, nb[t], float(centre[t, 0]), float(centre[t, 1]))  # fmt: skip
         if code[t] == 0 or code[t] == _TRUNCATED:
             uv_out[t, 0], uv_out[t, 1], spx[t] = cu + centre[t, 0], cv + centre[t, 1], sigma
     return uv_out, area, mass, smass, spx, white, noise, code, frame_noise
