@@ -178,6 +178,29 @@ def test_grid_carries_a_narrow_strip_past_a_missing_dot():
     assert all(node[k] == n for n, k in labels.items())
 
 
+def test_a_strip_grows_past_its_larger_dots_as_soft_footage_images_them():
+    """A strip three columns wide whose middle column holds a larger blob every fourth row, its
+    thresholded area 2.2 times its neighbours' (720p with 1 px of blur: the blur shrinks the
+    smaller dots' thresholded area the more; printed, 1.5625 times): with the design's size
+    ratio the grid grows past them, but for the one in its last row (nothing beyond it: a dot
+    there that large took in an edge's fringe); as one size, it stops at the first."""
+    rows, cols = 20, 3
+    node = [(i, j) for i in range(rows) for j in range(cols)]
+    pos = np.array([(7.0 * j, 6.0 * i) for i, j in node])
+    area = [13.2 if (i % 4 == 3 and j == 1) else 6.0 for i, j in node]
+    blobs = pd.DataFrame({"area_px": area, "background": 1.0, "roundness": 0.5}, index=range(len(node)))
+    seed = {(i, j): node.index((i, j)) for i in range(3) for j in range(cols)}
+
+    def grown(size_ratio: float) -> dict:
+        pool = _Pool(pos, np.ones(len(node), bool), blobs)
+        pool.free[list(seed.values())] = False
+        return grow_grid(pool, seed, 0.3, size_ratio)
+
+    labels = grown((2.0 / 1.6) ** 2)
+    assert set(labels) == set(node) - {(19, 1)} and all(node[k] == n for n, k in labels.items())
+    assert len(grown(1.0)) < 4 * cols
+
+
 def test_a_strip_two_columns_wide_is_seeded_only_when_asked():
     """Beyond a band, a strip of two columns (the band hides the column on the start's left): no
     3 x 3 block fits, the 3 x 2 block on the other side does when ``narrow``."""

@@ -145,10 +145,20 @@ def grow_chain(
 NEIGHBOURS = ((1, 0), (-1, 0), (0, 1), (0, -1))
 MIN_SUPPORT = 3  # labelled nodes among the 8 around a node before it is predicted
 AREA_RANGE = (0.45, 1.85)  # a grid dot's area over its labelled neighbours' median
+# ... up to AREA_RANGE[1] x the design's larger over smaller dots' area (``size_ratio``) for a dot
+# inside the grid, with a dot beyond it on every side: a larger dot. On soft footage the blur
+# shrinks the smaller dots' thresholded area the more: at 720p (nvr, blur 1 px) the larger
+# membrane dots' area over their neighbours' was 1.71-1.75 at the median and 2.1-2.4 at the 99th
+# percentile (design 1.56), and AREA_RANGE alone stopped the grid's growth at every larger dot of
+# a strip three columns wide beyond a band (a 420 mm ring's camera left 6 of the 15 columns it saw
+# within 60 degrees of face on unlabelled). At the grid's edge such a blob is a dot that took in
+# an edge's fringe (an end row's larger dot merged with the pedestal face: 1.1 px off)
 WHITE_TOLERANCE = 0.08  # a grid dot's local white level may differ this much from its neighbours'
 
 
-def grow_grid(pool: _Pool, seed: dict[tuple[int, int], int], gate: float) -> dict[tuple[int, int], int]:
+def grow_grid(
+    pool: _Pool, seed: dict[tuple[int, int], int], gate: float, size_ratio: float = 1.0
+) -> dict[tuple[int, int], int]:
     """Extend a 2-D grid labelling ((row, col) -> dot) from its labelled neighbours.
 
     A node is predicted by every straight continuation (two labelled nodes in a line) and every
@@ -158,6 +168,9 @@ def grow_grid(pool: _Pool, seed: dict[tuple[int, int], int], gate: float) -> dic
     labelled nodes among its eight neighbours, or one fewer when one of them continues a straight
     line and the other, beside it, gives the spacing across that line: that carries a strip a few
     columns wide past a dot missing from its edge column (towards a silhouette, beyond a band).
+    A dot's area over its labelled neighbours' median must be within ``AREA_RANGE``, or up to
+    ``size_ratio`` (the design's larger over its smaller dots' area) times its upper end for a
+    dot inside the grid (:func:`_inside`).
     """
     labels = dict(seed)
     pos = pool.pos
@@ -209,7 +222,10 @@ def grow_grid(pool: _Pool, seed: dict[tuple[int, int], int], gate: float) -> dic
             if k < 0:
                 continue
             nb = [labels[(i + di, j + dj)] for di, dj in NEIGHBOURS if (i + di, j + dj) in labels]
-            if not AREA_RANGE[0] <= pool.area[k] / np.median(pool.area[nb]) <= AREA_RANGE[1]:
+            ratio = pool.area[k] / np.median(pool.area[nb])
+            larger = AREA_RANGE[1] < ratio <= AREA_RANGE[1] * size_ratio
+            same = AREA_RANGE[0] <= ratio <= AREA_RANGE[1]
+            if not (same or larger and _inside(pool, labels, (i, j), k, gate)):
                 continue  # not a dot of this grid (a fragment of an edge, a merged pair, ...)
             if abs(pool.white[k] / np.median(pool.white[nb]) - 1) > WHITE_TOLERANCE:
                 continue  # printed on another surface (a longitudinal band in front, ...)
@@ -228,6 +244,23 @@ def grow_grid(pool: _Pool, seed: dict[tuple[int, int], int], gate: float) -> dic
             (i + di, j + dj) for (i, j) in proposals for di in range(-2, 3) for dj in range(-2, 3)
         } - set(labels)
     return labels
+
+
+def _inside(pool: _Pool, labels: dict, node: tuple[int, int], k: int, gate: float) -> bool:
+    """Whether dot ``k`` at grid ``node`` has a dot beyond it on every side along its row and
+    column: a labelled node, or a detected dot (free or not) within ``gate`` of the step from the
+    labelled node opposite, mirrored."""
+    i, j = node
+    for di, dj in NEIGHBOURS:
+        if (i + di, j + dj) in labels:
+            continue
+        back = labels.get((i - di, j - dj))
+        if back is None:
+            return False
+        step = pool.pos[k] - pool.pos[back]
+        if not pool.tree.query_ball_point(pool.pos[k] + step, gate * float(np.linalg.norm(step))):
+            return False
+    return True
 
 
 def _seed_grid(
@@ -266,12 +299,15 @@ def _seed_grid(
     return None
 
 
-def _grow_region(pool: _Pool, start: int, down: np.ndarray, gate: float, narrow: bool = False) -> list[dict]:
-    """The grid region grown from a free dot (taking its dots from the pool), or none."""
+def _grow_region(
+    pool: _Pool, start: int, down: np.ndarray, gate: float, size_ratio: float, narrow: bool = False
+) -> list[dict]:
+    """The grid region grown from a free dot (taking its dots from the pool), or none
+    (``size_ratio``: :func:`grow_grid`'s)."""
     if not pool.free[start]:
         return []
     seed = _seed_grid(pool, start, down, gate, narrow)
     if seed is None:
         return []
     pool.free[list(seed.values())] = False
-    return [grow_grid(pool, seed, gate)]
+    return [grow_grid(pool, seed, gate, size_ratio)]
