@@ -14,8 +14,11 @@ column step over the row step against the kit's pitches; near a silhouette a cen
 biased and the columns crowd). The dot's window is measured there
 (:func:`triaxtrack.window.measure_windows`); a blob is its dot where it is clean (not merged,
 lost or at the edge), within the gate of the prediction (``gate`` x the distance of its nearest
-neighbour), no reported target sits within ``min_separation`` of that distance of it, and its
-normalised mass is within ``MASS_RATIO`` of the median reported dot's; a dot beyond two
+neighbour), no reported target sits within ``min_separation`` of that distance of it, its
+normalised mass is within ``MASS_RATIO`` of the median reported dot's and, over its printed size,
+like its reported grid neighbours' (:func:`_mass_like_neighbours`: within the tracker's
+``mass_change`` or ``MASS_SCATTER_K`` times their scatter, so a dot partly hidden, as a row
+emerging from under a strap is, waits until it is whole); a dot beyond two
 reported columns must be seen within 60 degrees of face on by its own column step (from the dot
 beside it) and must not be its row's last (:func:`_row_goes_on`: at a silhouette, seen through
 the cell's lens, the column steps do not show how obliquely the last dot is seen, and its blob
@@ -34,7 +37,7 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
-from triaxtrack.kit import membrane_radius
+from triaxtrack.kit import membrane_radius, target_table
 from triaxtrack.kit_design import KitDesign
 from triaxtrack.nearest import nearest_within
 from triaxtrack.neighbour_motion import solve3
@@ -48,6 +51,13 @@ CONFIRM_FRAMES = 2  # measured frames in a row in which a dot must pass before i
 GROWTH_ROUNDS = 30  # rings a hidden patch grows inward within one frame, at most
 BAND_REACH = 2.0  # x its spacing: a dot this near a cell-wall target is beside (or behind) a cell
 # band, whose edge cuts its image: identification, which knows the bands, labels it or not
+# a dot's normalised mass over its printed size differs from its reported grid neighbours' median
+# by at most the tracker's ``mass_change`` or this many times their scatter (the robust standard
+# deviation of their logs, with the dot's own measurement noise), whichever is larger, as the
+# tracker keeps a dot: one partly hidden (a row emerging from under a strap, its centroid 1-2 px
+# off) or merged with something is not taken on
+MASS_SCATTER_K = 4.0
+MIN_MASS_NEIGHBOURS = 4  # reported neighbours with a mass needed for that scatter
 MIN_VIEW_COS = 0.5  # a dot seen more obliquely than 60 degrees (its image squeezed across the
 # columns to half) is not taken on: its centroid is biased there and its neighbours crowd it
 
@@ -61,15 +71,19 @@ class DotGrid(NamedTuple):
 
     ids: np.ndarray
     aspect: float
+    size: np.ndarray | None = None  # (rows, columns): each dot's printed area over the smaller dots'
 
 
 def dot_grid(design: KitDesign) -> DotGrid:
-    """The :class:`DotGrid` of a kit design (``membrane`` and ``specimen`` sections)."""
+    """The :class:`DotGrid` of a kit design (``membrane`` and ``specimen`` sections), with each
+    dot's printed ``size`` from the kit's target table."""
     m = design.membrane
     rows, columns = int(m.rows), int(m.columns)
     ids = int(m.first_id) + np.arange(rows * columns, dtype=np.int64).reshape(rows, columns)
     aspect = (2 * np.pi * membrane_radius(design) / columns) / (design.specimen.height / rows)
-    return DotGrid(ids, float(aspect))
+    diameter = target_table(design).set_index("id")["diameter_mm"].reindex(ids.ravel()).to_numpy(float)
+    size = (diameter / np.nanmin(diameter)) ** 2
+    return DotGrid(ids, float(aspect), size.reshape(rows, columns))
 
 
 class Candidates(NamedTuple):
@@ -263,6 +277,8 @@ def complete_grid(
     max_fit_px: float,
     cell_uv: np.ndarray | None = None,
     grid_ids: np.ndarray | None = None,
+    size: np.ndarray | None = None,
+    mass_change: float = 0.25,
 ) -> tuple[Candidates, Found]:
     """One frame of completion (module docstring): the candidates with their streaks updated,
     and the ones taken on. ``grid_index`` (rows, columns): the followed target's row in ``uv``
@@ -271,7 +287,9 @@ def complete_grid(
     ``(gray, uv (k, 2), radius (k,)) -> WindowMeasure`` (k may be 0); ``aspect``: the grid's
     (:class:`DotGrid`); ``cell_uv`` (c, 2): the cell-wall targets reported this frame;
     ``grid_ids`` (rows, columns): the grid's IDs (:class:`DotGrid` ``ids``), without which the
-    grid does not grow within the frame.
+    grid does not grow within the frame; ``size`` (rows, columns): its dots' printed sizes
+    (:class:`DotGrid` ``size``), with which a dot's mass must be like its neighbours' within
+    ``mass_change`` (:func:`_mass_like_neighbours`).
 
     Within the frame the grid grows inward ring by ring (at most ``GROWTH_ROUNDS``): a candidate
     that passes places the next, as a reported dot would. So a patch hidden at the labelled
@@ -285,7 +303,7 @@ def complete_grid(
     passed = np.zeros(len(ids), bool)
     measured = np.zeros(len(ids), bool)  # a blob that failed is not measured again this frame
     parts: list[tuple[np.ndarray, np.ndarray, np.ndarray, WindowMeasure]] = []  # (which, step, rad, meas)
-    index, at, rad_of = grid_index.copy(), uv, radius
+    index, at, rad_of, mass_of = grid_index.copy(), uv, radius, mass
     known = uv[np.isfinite(uv).all(axis=1)]
     for _ in range(GROWTH_ROUNDS):
         which = np.nonzero(~passed & ~measured)[0]
@@ -303,6 +321,8 @@ def complete_grid(
         measured[which[k]] = True
         ok = _passes(gray, measure, meas, pred[k], near[k], beside[k], rad[k], known, typical,
                      gate=gate, min_separation=min_separation, aspect=aspect, cell_uv=cell_uv)  # fmt: skip
+        if size is not None:
+            ok &= _mass_like_neighbours(meas, row[which[k]], col[which[k]], index, mass_of, size, mass_change)
         if not ok.any() or grid_ids is None:
             break
         new = which[k[ok]]
@@ -311,7 +331,7 @@ def complete_grid(
         # the passed dots place the next ring, as reported dots; the dots beside them that are
         # no candidate yet join
         index[row[new], col[new]] = len(at) + np.arange(len(new))
-        at, rad_of = np.r_[at, meas.uv[ok]], np.r_[rad_of, rad[k[ok]]]
+        at, rad_of, mass_of = np.r_[at, meas.uv[ok]], np.r_[rad_of, rad[k[ok]]], np.r_[mass_of, meas.mass[ok]]
         known = np.r_[known, meas.uv[ok]]
         er, ec = _joining(index, row, col, new)
         ids, row, col = np.r_[ids, grid_ids[er, ec]], np.r_[row, er], np.r_[col, ec]
@@ -322,6 +342,57 @@ def complete_grid(
     found = _found(ids, sel, parts)
     keep = ~sel & ((np.arange(len(ids)) < len(cand.ids)) | passed)  # a new dot stays if it passed
     return Candidates(ids[keep], row[keep], col[keep], streak[keep]), found
+
+
+def _mass_like_neighbours(
+    meas: WindowMeasure, row: np.ndarray, col: np.ndarray, where: np.ndarray, mass: np.ndarray,
+    size: np.ndarray, change: float,
+) -> np.ndarray:  # fmt: skip
+    """(k,) bool: whether each measured candidate (``meas``, at grid ``row``, ``col``) has the
+    mass of its reported grid neighbours within ``GRID_REACH`` (``where``: grid -> row of
+    ``mass``, -1: none), each over its printed ``size``: its own over their median differs from
+    1 by at most the larger of ``change`` and ``MASS_SCATTER_K`` x the scatter (the robust
+    standard deviation of their logs, and its own measurement's relative noise). True where
+    fewer than ``MIN_MASS_NEIGHBOURS`` neighbours have a mass (the other checks decide)."""
+    centre, spread = _neighbour_log_mass(row, col, where, mass, size, GRID_REACH)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        ratio = meas.mass / size[row, col] / np.exp(centre)
+        noise = np.hypot(spread, meas.sigma_mass / meas.mass)
+        like = np.abs(ratio - 1) <= np.fmax(change, MASS_SCATTER_K * noise)
+    return like | ~np.isfinite(centre)
+
+
+@numba.njit(cache=True)
+def _neighbour_log_mass(
+    row: np.ndarray, col: np.ndarray, where: np.ndarray, mass: np.ndarray, size: np.ndarray, reach: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """Per candidate: the median and the robust standard deviation (1.4826 x the median absolute
+    deviation) of log(mass / size) over its grid neighbours within ``reach`` rows and columns
+    that have a finite ``mass`` (indexed by ``where``; columns wrap around); NaN where fewer than
+    ``MIN_MASS_NEIGHBOURS``."""
+    m = len(row)
+    rows, cols = where.shape
+    centre, spread = np.full(m, np.nan), np.full(m, np.nan)
+    vals = np.empty((2 * reach + 1) ** 2)
+    for i in range(m):
+        k = 0
+        for dr in range(-reach, reach + 1):
+            r = row[i] + dr
+            if r < 0 or r >= rows:
+                continue
+            for dc in range(-reach, reach + 1):
+                c = (col[i] + dc) % cols
+                j = where[r, c]
+                if (dr == 0 and dc == 0) or j < 0 or not np.isfinite(mass[j]) or mass[j] <= 0:
+                    continue
+                vals[k] = np.log(mass[j] / size[r, c])
+                k += 1
+        if k < MIN_MASS_NEIGHBOURS:
+            continue
+        med = np.median(vals[:k])
+        centre[i] = med
+        spread[i] = 1.4826 * np.median(np.abs(vals[:k] - med))
+    return centre, spread
 
 
 def _passes(

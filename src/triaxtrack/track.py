@@ -510,7 +510,8 @@ def _complete(
         gray, cand, index.reshape(grid.ids.shape), uv, state.radius, mass,
         lambda g, p, r: measure_targets(g, p, r, cfg), aspect=grid.aspect, gate=cfg.gate,
         min_separation=cfg.min_separation, max_fit_px=cfg.max_flow_residual_px,
-        cell_uv=uv[reported & (state.kind == CELL_WALL)], grid_ids=grid.ids,
+        cell_uv=uv[reported & (state.kind == CELL_WALL)], grid_ids=grid.ids, size=grid.size,
+        mass_change=cfg.mass_change,
     )  # fmt: skip
     if len(found.ids):
         _adopt(state, found, reported)
