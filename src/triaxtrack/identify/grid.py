@@ -225,7 +225,7 @@ def grow_grid(
             ratio = pool.area[k] / np.median(pool.area[nb])
             larger = AREA_RANGE[1] < ratio <= AREA_RANGE[1] * size_ratio
             same = AREA_RANGE[0] <= ratio <= AREA_RANGE[1]
-            if not (same or larger and _inside(pool, labels, (i, j), k, gate)):
+            if not (same or (larger and _inside(pool, labels, (i, j), k, gate))):
                 continue  # not a dot of this grid (a fragment of an edge, a merged pair, ...)
             if abs(pool.white[k] / np.median(pool.white[nb]) - 1) > WHITE_TOLERANCE:
                 continue  # printed on another surface (a longitudinal band in front, ...)

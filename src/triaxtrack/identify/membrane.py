@@ -57,7 +57,7 @@ def _label_membrane(f: _Frame, pool: _Pool, centres: dict, design: KitDesign, p:
     anchors = _pedestal_anchors(centres, design)
     axis = _axis_down(anchors)
     area = f.blobs.area_px.to_numpy()
-    sizes = _size_ratio(design.membrane)
+    size_ratio = _size_ratio(design.membrane)
     regions = []
     z_from_face = design.pedestal_targets.stripes[0].z_from_face
     for an in anchors:
@@ -73,7 +73,7 @@ def _label_membrane(f: _Frame, pool: _Pool, centres: dict, design: KitDesign, p:
             depth_mm = design.specimen.height / 4 + z_from_face
             start_at = centre + sign * down * depth_mm * ellipse_radius(mp[None], down[None])[0] / rc
         _, start = pool.tree.query(start_at)
-        regions += _grow_region(pool, int(start), down, p.gate, sizes)
+        regions += _grow_region(pool, int(start), down, p.gate, size_ratio)
     # then the dots no pedestal CT led to (beyond a longitudinal stripe's band): their regions
     # are fixed across the band below. Strips two columns wide are seeded last, from what the
     # wider regions left
@@ -86,7 +86,7 @@ def _label_membrane(f: _Frame, pool: _Pool, centres: dict, design: KitDesign, p:
         lo, hi = np.mean(tops) if tops else -np.inf, np.mean(bottoms) if bottoms else np.inf
         for narrow in (False, True):
             for k in np.nonzero(pool.free & (s > lo) & (s < hi))[0]:
-                regions += _grow_region(pool, int(k), axis, p.gate, sizes, narrow)
+                regions += _grow_region(pool, int(k), axis, p.gate, size_ratio, narrow)
     ctx = _MembraneView.of(regions, anchors, axis, f.pos, design)
     phases = [_grid_phase(g, area, p) if len(g) >= p.min_region_dots else None for g in regions]
     fixed: dict[int, tuple[int, int]] = {}
