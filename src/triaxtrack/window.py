@@ -66,6 +66,7 @@ from triaxtrack.window_rows import (
     MEAN_SHIFT_STEPS,
     PLANES,
     measure_rows,
+    shifted_centre,
     valley,
 )
 
@@ -182,11 +183,8 @@ def _mean_shift(wins: np.ndarray, at: int, m: np.ndarray, xy: np.ndarray, off: n
             v, x, y = np.int64(wins[at + _U(p)]), off[0, p], off[1, p]
             cnt, sv, sx, svx = cnt + take, sv + take * v, sx + take * x, svx + take * v * x
             sy, svy = sy + take * y, svy + take * v * y
-        if cnt == 0:
-            break
-        s = cnt * white - sv
-        ux, uy = (white * sx - svx) / s, (white * sy - svy) / s
-        if ux == cx and uy == cy:
+        ux, uy = shifted_centre(cnt, white, sv, sx, svx, sy, svy)
+        if cnt == 0 or (ux == cx and uy == cy):
             break
         cx, cy = ux, uy
     return cx, cy

@@ -124,6 +124,19 @@ def _dilate(src: np.ndarray, dst: np.ndarray, n: int) -> None:
 
 
 @numba.njit(cache=True)
+def shifted_centre(
+    cnt: int, white: float, sv: int, sx: int, svx: int, sy: int, svy: int
+) -> tuple[float, float]:
+    """A mean shift's next centre from its integer sums over the ``cnt`` pixels taken (levels
+    ``v``, offsets ``x``, ``y``): the contrast-weighted centre, sum(w x) / sum(w) with w = white
+    - v, as sum(w x) = W sum(x) - sum(v x); NaN where no pixel was taken."""
+    if cnt == 0:
+        return np.nan, np.nan
+    s = cnt * white - sv
+    return (white * sx - svx) / s, (white * sy - svy) / s
+
+
+@numba.njit(cache=True)
 def _mean_shift(wins: np.ndarray, at: int, n: int, darkest: int, white: float, cx: float, cy: float,
                 core: float) -> tuple[float, float]:  # fmt: skip
     """The contrast-weighted centre of the ink (levels <= ``darkest``) within ``core`` (squared
@@ -147,11 +160,8 @@ def _mean_shift(wins: np.ndarray, at: int, n: int, darkest: int, white: float, c
                 rc, rv, rx, rvx = rc + take, rv + take * v, rx + take * x, rvx + take * v * x
             y = np.int64(i - h)
             cnt, sv, sx, svx, sy, svy = cnt + rc, sv + rv, sx + rx, svx + rvx, sy + rc * y, svy + rv * y
-        if cnt == 0:
-            break
-        s = cnt * white - sv
-        ux, uy = (white * sx - svx) / s, (white * sy - svy) / s
-        if ux == cx and uy == cy:
+        ux, uy = shifted_centre(cnt, white, sv, sx, svx, sy, svy)
+        if cnt == 0 or (ux == cx and uy == cy):
             break
         cx, cy = ux, uy
     return cx, cy
