@@ -39,6 +39,7 @@ from triaxtrack.identify.coded import _ct_stripes, _plausible_cts
 from triaxtrack.identify.membrane import _facing_column, _label_beside_band, _off_grid
 from triaxtrack.identify.merged import _recentred_beside_band
 from triaxtrack.identify.state import UNLABELLED
+from triaxtrack.identify.uncoded_stripes import _camera_azimuth, _end_state, _steps, _which_stripe
 from triaxtrack.kit import coded_target_polygons, ct_codes, load_kit_design, target_table
 from triaxtrack.kit_design import CodedTargetDesign, MembraneDesign
 from triaxtrack.optics import read_cameras
@@ -354,6 +355,118 @@ def test_a_stripe_is_told_from_a_membrane_column_by_its_spacing(kit):
     found = _straight_chains(pos, np.r_[stripe_ids, column, row], axis, pitch, design)
     assert len(found) == 1 and sorted(found[0]) == list(stripe_ids)
     assert list(found[0]) == list(stripe_ids) or list(found[0]) == list(stripe_ids[::-1])  # in order
+
+
+def test_a_stripes_steps_are_counted_and_what_lies_in_line_past_its_ends_left_out():
+    """Gaps between a chain's dots are whole numbers of the stripe's spacing, which perspective
+    changes linearly along it (here 10 to 12 px); a dot in line 2.22 spacings before the first
+    (the CT's Eq. 1 dot, 7 mm above the stripe's top) and 4.13 after the last (the CT's centre dot)
+    are not of the stripe; a gap of 2.5 spacings is not a stripe's."""
+    i = np.r_[0:20, 23:40]  # three dots hidden after the twentieth
+    t = 10 * i + i**2 / 39  # spacing 10 -> 12 px
+    spacing = lambda k: 10 + (2 * k + 1) / 39  # noqa: E731
+    before = t[0] - 2.22 * spacing(-1)
+    after = t[-1] + 4.13 * spacing(40)
+    lo, hi, steps = _steps(np.r_[before, t, after])
+    assert (lo, hi) == (1, len(t) + 1)
+    assert list(steps) == list(np.diff(i))
+    assert _steps(np.r_[t[:10], t[9] + 2.5 * spacing(9), t[10:] + 2.5 * spacing(9)]) is None
+
+
+def _stripe_image(
+    n: int, end_margin_px: float, occluder_from_px: float | None = None, band_from_px: int = 8
+) -> tuple[np.ndarray, np.ndarray]:
+    """A white band (200, 24 px wide) down a dark background (30) with ``n`` dots (ink 20, radius
+    4 px) 16 px apart from v = 20, the band ending ``end_margin_px`` below the last dot; a dark
+    occluder from ``occluder_from_px`` below the last dot on; the band from row ``band_from_px``.
+    Returns the image and the dots."""
+    img = np.full((200, 80), 30.0)
+    last = 20 + 16 * (n - 1)
+    img[band_from_px : int(last + end_margin_px), 28:52] = 200.0
+    uv = np.array([(40.0, 20.0 + 16 * k) for k in range(n)])
+    yy, xx = np.mgrid[:200, :80]
+    for u, v in uv:
+        img[(xx - u) ** 2 + (yy - v) ** 2 <= 16] = 20.0
+    if occluder_from_px is not None:
+        img[int(last + occluder_from_px) :, :] = 30.0
+    return cv2.GaussianBlur(img, (0, 0), 1.0), uv
+
+
+def test_a_stripes_end_is_closed_where_its_band_ends_beside_its_last_dot():
+    """An end whose band stops past its last dot (as printed: 12 px here, under a spacing of 16) is
+    closed; where the chain stops one dot short (a dot missed), the band runs on beside that dot:
+    open; where an occluder hides the band right past the dot, beside it too: open; where the next
+    dot would fall outside the picture: cut, if the band is white beside the dot (open for a dot in
+    line past the band's end)."""
+    img, uv = _stripe_image(8, 12.0)
+    down = np.array([0.0, 16.0])
+    state = lambda k, im=img: _end_state(im, uv[k], down, 7.0, 200.0, 20.0)  # noqa: E731
+    assert state(7) == "closed"
+    assert state(6) == "open"  # the last dot missed
+    assert _end_state(img, uv[0], -down, 7.0, 200.0, 20.0) == "cut"  # its next one at v = 4
+    off_band, _ = _stripe_image(8, 12.0, band_from_px=30)  # the first dot past the band's end
+    assert _end_state(off_band, uv[0], -down, 7.0, 200.0, 20.0) == "open"
+    hidden, _ = _stripe_image(8, 12.0, occluder_from_px=-11.0)  # from 5 px past the seventh dot
+    assert _end_state(hidden, uv[6], down, 7.0, 200.0, 20.0) == "open"
+
+
+def test_the_stripe_a_chain_can_be_is_named_by_the_membrane_around_it(kit):
+    """The labelled membrane columns give the camera's azimuth (their image position across the
+    axis a sinusoid of their angle); a chain is the one stripe within 80 degrees of it on its
+    image's side (or within 25 degrees of it on either): a camera facing half-way between two
+    stripes tells them apart by their side, and names no stripe for a chain on its axis."""
+    design = kit[0]
+    m, cell = design.membrane, design.cell_targets
+    top = cell.ct_stripes[0]
+    phi = [
+        np.deg2rad(cell.theta0) + 2 * np.pi * (s.ct - top.first_id) / top.count
+        for s in cell.longitudinal_stripes
+    ]
+    cols = np.arange(m.columns)
+    theta = np.deg2rad(m.theta0) + 2 * np.pi * cols / m.columns
+    for psi, named in (
+        (phi[1] + np.deg2rad(10), {-10: 1}),
+        (phi[1] + np.deg2rad(60), {-60: 1, 60: 2, 0: None}),
+    ):
+        facing = np.cos(theta - psi) > 0.3
+        ids = m.first_id + np.r_[30 * m.columns + cols[facing], 31 * m.columns + cols[facing]]  # two rows
+        x = np.tile(500 - 300 * np.sin(theta[facing] - psi), 2)  # image x falls as the angle grows (a mirror)
+        pos = np.c_[x, np.repeat([300.0, 310.0], len(x) // 2)]
+        f = _Frame(blobs=pd.DataFrame(), pos=pos, ids=ids, group=np.full(len(x), ""), quality=np.ones(len(x)),
+                   reason=np.full(len(x), ""))  # fmt: skip
+        azimuth = _camera_azimuth(f, np.array([1.0, 0.0]), design)
+        assert azimuth is not None
+        assert np.rad2deg(np.angle(np.exp(1j * (azimuth[0] - psi)))) == pytest.approx(0, abs=1e-6)
+        for off, stripe in named.items():  # a stripe's image lies nearer the axis than the membrane's
+            assert _which_stripe(500 - 200 * np.sin(np.deg2rad(off)), azimuth, design) == stripe, (psi, off)
+
+
+def test_a_stripe_whose_cts_are_out_of_the_picture_is_labelled_from_its_ends(kit_dir, kit, tmp_path):
+    """A close ring (300 mm, focal 0.677 x width, 71 mm high): the cell's CT bands are out of the
+    picture, and the longitudinal stripes, found as straight chains, are named by the membrane
+    behind them and counted from their closed ends. Zero wrong IDs, and every camera labels at least
+    90 % of the stripe dots the truth sees within 60 degrees of face on (none before)."""
+    from triaxtrack.score import _view_cos
+    from triaxtrack.simulate import SimulationConfig, simulate_test
+
+    design, table, codes = kit
+    cfg = SimulationConfig(cameras=13, frames=2, calibration_images=1, seed=8, camera_radius_mm=300.0,
+                           focal_factor=0.677, camera_height_mm=71.0)  # fmt: skip
+    simulate_test(cfg, kit_dir, tmp_path, "ring300", chunk_size=2)
+    cams = read_cameras(tmp_path / "truth" / "cameras.json")
+    obs = pd.read_parquet(tmp_path / "truth" / "observations.parquet")
+    points = pd.read_parquet(tmp_path / "truth" / "points.parquet")
+    stripes = set(table.id[table.group.str.startswith("cell_long")])
+    for name in ("cam01", "cam06"):
+        img = read_frame(tmp_path / "videos" / f"{name}.mp4", 0)
+        labels = label_frame(img, cams[name], design, codes).assign(camera=name, frame=0)
+        df = score_identification(labels, obs, points, cams, table, design, ScoreTolerances())
+        assert df[df.metric == "wrong_ids"].value.sum() == 0, name
+        seen = obs[(obs.camera == name) & (obs.frame == 0) & obs.id.isin(stripes)]
+        seen = seen[_view_cos(cams[name], seen.id.to_numpy(), 0, points) >= 0.5]
+        assert len(seen) >= 40, name
+        share = seen.id.isin(labels.id[labels.id > 0]).mean()
+        assert share >= 0.9, (name, share)
 
 
 def test_membrane_row_ends():

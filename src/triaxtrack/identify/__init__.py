@@ -17,6 +17,8 @@ Modules (the method of each step is described in its module):
   their labels, the plausible ones, the CT stripes);
 * :mod:`~triaxtrack.identify.cell`: the cell's annular stripes (Eq. 1) and longitudinal
   stripes, and the bands that hide the membrane behind them (and the dots beside them);
+* :mod:`~triaxtrack.identify.uncoded_stripes`: longitudinal stripes whose CTs are out of the
+  picture (a close ring), named by the membrane behind them and counted from a printed end;
 * :mod:`~triaxtrack.identify.membrane`: the membrane grid's regions, phase and IDs (Eq. 4),
   regions fixed across a band, the dots beside a band labelled from the grid around them, and
   the grid-neighbour checks on membrane IDs (a dot off the smooth lines of its grid column and

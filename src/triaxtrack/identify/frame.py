@@ -41,6 +41,7 @@ from triaxtrack.identify.membrane import (
 )
 from triaxtrack.identify.merged import _recentred_beside_band, _recentred_beside_edge, _split_merged_pairs
 from triaxtrack.identify.state import LABEL_COLUMNS, NOT_REACHED, UNLABELLED, IdentifyParams, _Frame
+from triaxtrack.identify.uncoded_stripes import label_uncoded_stripes
 from triaxtrack.kit import ct_codes, load_kit_design, target_table
 from triaxtrack.kit_design import KitDesign
 from triaxtrack.tables import FRAME_MAP, LABELS, concat_tables, read_table, write_table
@@ -125,23 +126,25 @@ def _hide_behind_bands(
 
 def _drop_unidentified_stripes(
     f: _Frame, pool: _Pool, centres: dict, known: np.ndarray, reach: np.ndarray, design: KitDesign
-) -> np.ndarray:
+) -> tuple[np.ndarray, list[np.ndarray], np.ndarray, float]:
     """Take out of the pool the longitudinal stripes whose coded target is out of the picture: a
     straight line of free dots along the axis, on a white band in front of the membrane, never
     membrane dots, whose band hides the membrane (``reach``: :func:`_hide_behind_bands`). Dots in
     an identified stripe's band zone (``known``) are not candidates: their white level is its.
-    Returns the dots left beside these bands."""
+    Returns the dots left beside these bands, the stripes (blob indices, in order along each),
+    the image direction down the specimen and the membrane's row pitch (pixels)."""
     pos = f.pos
     axis = _axis_down(_pedestal_anchors(centres, design))
     free = np.nonzero(pool.free)[0]
     pitch = float(np.nanmedian(_row_pitch_px(pos, free, axis))) if len(free) > 9 else np.nan
     cand = np.nonzero(_on_another_surface(pool) & ~known)[0]
     beside = np.zeros(len(pos), bool)
-    for order in _straight_chains(pos, cand, axis, pitch, design):
+    chains = _straight_chains(pos, cand, axis, pitch, design)
+    for order in chains:
         pool.free[order] = False
         f.reason[order] = "on a longitudinal stripe not identified (its coded target not seen)"
         beside |= _hide_behind_band(f, pool, order, reach[:, 0], reach[:, 1], design)
-    return beside
+    return beside, chains, axis, pitch
 
 
 def _drop_inaccurate(
@@ -298,8 +301,14 @@ def identify(
     _label_longitudinal(f, pool, centres, design, p)
     long_names = {s.name for s in design.cell_targets.longitudinal_stripes}
     reach, known, beside = _hide_behind_bands(f, pool, long_names, blur_px, design, gray, detect_params)
-    beside |= _drop_unidentified_stripes(f, pool, centres, known, reach, design)
+    unseen_ct, chains, axis, pitch = _drop_unidentified_stripes(f, pool, centres, known, reach, design)
+    beside |= unseen_ct
     _label_membrane(f, pool, centres, design, p)
+    # a stripe beyond the membrane's silhouette is on no brighter surface than its own dots: it is
+    # a straight chain among the dots the membrane leaves
+    left = np.nonzero(pool.free & (f.ids == UNLABELLED))[0]
+    chains = chains + _straight_chains(pos, left, axis, pitch, design)
+    label_uncoded_stripes(f, chains, candidates, gray, axis, blur_px, design)  # named by the membrane behind
     _label_beside_band(f, pool, beside, reach[:, 0], _band_blur(blur_px), design.membrane, p)
     edge = blobs.beside_edge.to_numpy(bool, copy=True)
     recentred = np.zeros(n, bool)
