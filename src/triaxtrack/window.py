@@ -307,7 +307,7 @@ def _cell(m: np.ndarray, wins: np.ndarray, at: int, xy: np.ndarray, cx: float, c
                     cell[p] = 0
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _measure_one(wins: np.ndarray, at: int, xy: np.ndarray, off: np.ndarray, cx: float, cy: float, rad: float,
                  white: float, noise: float, s_white: float, ink_fraction: float, disc_margin: float,
                  m: np.ndarray, rows: np.ndarray, nb: np.ndarray, ox: float, oy: float) -> tuple:  # fmt: skip

@@ -22,12 +22,13 @@ ABOVE_WHITE_SPREAD = 0.647
 _U = np.uint64  # unsigned indices (numba then leaves out the wrap-around of negative ones)
 
 
-@numba.njit(cache=True)
-def _largest(ring: np.ndarray, k: int) -> tuple[int, int]:
-    """The ``k``-th and ``k + 1``-th largest (from 0) grey levels counted in the histogram ``ring``."""
+@numba.njit(cache=True, inline="always")
+def _largest(hist: np.ndarray, at: int, k: int) -> tuple[int, int]:
+    """The ``k``-th and ``k + 1``-th largest (from 0) grey levels counted in the histogram
+    ``hist[at:at + 256]``."""
     seen, first = 0, -1
     for v in range(255, -1, -1):
-        seen += ring[v]
+        seen += hist[at + v]
         if first < 0 and seen > k:
             first = v
         if seen > k + 1:
@@ -35,13 +36,13 @@ def _largest(ring: np.ndarray, k: int) -> tuple[int, int]:
     return max(first, 0), 0
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _lerp(a: float, b: float, gamma: float) -> float:
     """numpy.percentile's linear interpolation (the same rounding)."""
     return b - (b - a) * (1 - gamma) if gamma >= 0.5 else a + (b - a) * gamma
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _white_band(hist: np.ndarray, count: int) -> tuple[float, float]:
     """numpy.percentile's (method 'linear') ``WHITE_BAND`` percentiles of the ``count`` >= 2 levels
     of the window's histograms (:func:`copy_window`), in one scan down from 255."""
@@ -62,7 +63,7 @@ def _white_band(hist: np.ndarray, count: int) -> tuple[float, float]:
     return 0.0, 0.0
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _inner_columns(ring_r2: float, h: int, inner: np.ndarray) -> None:
     """``inner[d]`` for d = 0..h: the largest column offset c >= 0 with c^2 + d^2 <= ``ring_r2``
     (-1: none), from the centre row out (each row's is at most the one before)."""
@@ -75,7 +76,7 @@ def _inner_columns(ring_r2: float, h: int, inner: np.ndarray) -> None:
         inner[d] = c
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def copy_window(
     g: np.ndarray, y0: int, x0: int, n: int, ring_r2: float, hist: np.ndarray, wins: np.ndarray, at: int,
     inner: np.ndarray,
@@ -85,7 +86,8 @@ def copy_window(
     two interleaved histograms of the window (a run of one level does not wait on itself), then
     the annulus's (pixels beyond ``ring_r2``, squared distance from the centre; ``inner``:
     scratch for :func:`_inner_columns`)."""
-    hist[:] = 0
+    for v in range(768):  # (in place: a slice would count references)
+        hist[v] = 0
     h, stride = n // 2, _U(n + 2)
     _inner_columns(ring_r2, h, inner)
     for q in range(stride * stride):
@@ -104,7 +106,7 @@ def copy_window(
             hist[_U(512) + _U(wins[row + j])] += 1
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def levels(hist: np.ndarray, n: int) -> tuple[float, float, float]:
     """The white level, noise (before it is held to the frame's) and the white level's
     uncertainty (module docstring) of an ``n`` x ``n`` window from its histograms (:func:`copy_window`):
@@ -120,7 +122,7 @@ def levels(hist: np.ndarray, n: int) -> tuple[float, float, float]:
         cnt += hist[512 + v]
     noise = 0.0
     if cnt > 0:
-        hi_v, lo_v = _largest(hist[512:], cnt - 1 - cnt // 2)  # sorted: (cnt - 1) // 2-th, next
+        hi_v, lo_v = _largest(hist, 512, cnt - 1 - cnt // 2)  # sorted: (cnt - 1) // 2-th, next
         lo_v = lo_v if cnt % 2 == 0 else hi_v
         noise = MAD_TO_SIGMA * (((lo_v - white) + (hi_v - white)) / 2) / ABOVE_WHITE_SPREAD
     noise = max(noise, QUANTISATION_NOISE)

@@ -1,17 +1,22 @@
 """One target's blob in its window (:mod:`triaxtrack.window`) on masks packed one row a word
 (bit j: column j), for windows of at most 63 columns: the same masks, re-centring and sums as the
-byte masks of :mod:`triaxtrack.window` give. Each row's disc is a run of columns found from its
-ends, a 3x3 dilation is three ORs of shifted words, and the loops over a row's pixels (the mean
-shift's, the weighted sums) have no branches, so that they run on whole vectors. The sums are of
-integers, the same in any order: the same results. Also the valley between touching targets
+byte masks of :mod:`triaxtrack.window` give. A row's disc is the word of its pixels' distance
+tests, a 3x3 dilation is three ORs of shifted words, and the loops over a row's pixels (the
+distance tests, the mean shift's and the weighted sums, these from the row's lowest bit taken to
+its highest) have no branches, so that they run on whole vectors. The sums are of integers, the
+same in any order: the same results. The planes of words are indexed in place (a view of one
+would count references, atomically, for every target). Also the valley between touching targets
 (:func:`valley`), which both kernels share. Compiled with numba."""
 
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numba
 import numpy as np
+from numba.core import types
+from numba.core.extending import intrinsic
 
 MEAN_SHIFT_STEPS = 3  # re-centring steps of the disc; motion left after prediction is sub-pixel
 INK_NOISE_K = 3.5  # ink: darker than the white level by at least this x the noise (one-sided
@@ -28,7 +33,7 @@ _U = np.uint64  # unsigned indices: numba leaves out the wrap-around of negative
 _ONE = np.int64(1)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def grey_at(wins: np.ndarray, at: int, stride: int, x: float, y: float) -> float:
     """The grey level of a (padded) window at ``wins[at:]`` at (x, y) relative to its centre,
     interpolated bilinearly between its pixels; -1 outside them."""
@@ -75,55 +80,57 @@ def valley(wins: np.ndarray, at: int, stride: int, cx: float, cy: float, nbk: np
     return True, cx + dx * at_top / steps, cy + dy * at_top / steps, dx, dy
 
 
-@numba.njit(cache=True)
-def _span(n: int, h: int, c: float, d2y: float, reach2: float) -> tuple[int, int]:
-    """The columns j (0 .. n - 1) of a row with ``(j - h - c)^2 + d2y <= reach2`` (the same
-    floating-point test as pixel by pixel: a run, as the left side grows away from ``c``), as
-    (first, last); first > last: none."""
+@numba.njit(cache=True, inline="always")
+def _within(n: int, h: int, c: float, d2y: float, reach2: float) -> np.int64:
+    """The word with bit j set for the columns j (0 .. n - 1) of a row with ``(j - h - c)^2 + d2y
+    <= reach2`` (the test of every pixel, without branches: vectorised)."""
+    w = np.int64(0)
     if not d2y <= reach2:
-        return 1, 0
-    s = math.sqrt(reach2 - d2y)
-    j0 = min(max(int(math.ceil(c + h - s)), 0), n - 1)
-    j1 = min(max(int(math.floor(c + h + s)), 0), n - 1)
-    while j0 > 0 and ((j0 - 1 - h) - c) * ((j0 - 1 - h) - c) + d2y <= reach2:
-        j0 -= 1
-    while j0 <= j1 and not ((j0 - h) - c) * ((j0 - h) - c) + d2y <= reach2:
-        j0 += 1
-    while j1 < n - 1 and ((j1 + 1 - h) - c) * ((j1 + 1 - h) - c) + d2y <= reach2:
-        j1 += 1
-    while j1 >= j0 and not ((j1 - h) - c) * ((j1 - h) - c) + d2y <= reach2:
-        j1 -= 1
-    return j0, j1
+        return w
+    for j in range(n):
+        dx = (j - h) - c
+        w |= np.int64(dx * dx + d2y <= reach2) << np.int64(j)
+    return w
 
 
-@numba.njit(cache=True)
-def _bits(j0: int, j1: int) -> np.int64:
-    """The word with bits j0 .. j1 set (none: 0)."""
-    if j0 > j1:
-        return np.int64(0)
-    return ((_ONE << np.int64(j1 + 1)) - _ONE) ^ ((_ONE << np.int64(j0)) - _ONE)
+def _one_word(bit_op: str) -> Any:
+    """A compiled function of one int64 word, LLVM's instruction ``bit_op`` on it: 'ctpop' (the
+    bits set), 'cttz' (the index of the lowest bit set; 64: none) or 'ctlz' (63 less it: the index
+    of the highest bit set; -1: none)."""
+
+    def typer(typingctx: Any, w: Any) -> Any:
+        if w != types.int64:
+            return None
+
+        def codegen(context: Any, builder: Any, sig: Any, args: Any) -> Any:
+            if bit_op == "ctpop":
+                return builder.ctpop(args[0])
+            no_poison = context.get_constant(types.boolean, False)  # (0 in: 64, not undefined)
+            if bit_op == "cttz":
+                return builder.cttz(args[0], no_poison)
+            return builder.sub(context.get_constant(types.int64, 63), builder.ctlz(args[0], no_poison))
+
+        return types.int64(types.int64), codegen
+
+    return intrinsic(typer)
 
 
-@numba.njit(cache=True)
-def _popcount(w: np.int64) -> int:
-    """The number of bits set in ``w`` (>= 0)."""
-    c = 0
-    while w:
-        w &= w - _ONE
-        c += 1
-    return c
+_popcount = _one_word("ctpop")  # the number of bits set in a word
+_lowest_bit = _one_word("cttz")  # the index of a word's lowest bit set (64: none)
+_highest_bit = _one_word("ctlz")  # the index of a word's highest bit set (-1: none)
 
 
-@numba.njit(cache=True)
-def _dilate(src: np.ndarray, dst: np.ndarray, n: int) -> None:
-    """Rows 1 .. n of ``dst`` = the 3x3 dilation of the rows of ``src`` (within the window)."""
+@numba.njit(cache=True, inline="always")
+def _dilate(words: np.ndarray, src: int, dst: int, n: int) -> None:
+    """Rows 1 .. n of plane ``dst`` of ``words`` = the 3x3 dilation of plane ``src`` (within the
+    window). (Planes are indexed in place: a view of one would count references.)"""
     full = (_ONE << np.int64(n)) - _ONE
     for i in range(1, n + 1):
-        v = src[i - 1] | src[i] | src[i + 1]
-        dst[i] = (v | (v << _ONE) | (v >> _ONE)) & full
+        v = words[src, i - 1] | words[src, i] | words[src, i + 1]
+        words[dst, i] = (v | (v << _ONE) | (v >> _ONE)) & full
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def shifted_centre(
     cnt: int, white: float, sv: int, sx: int, svx: int, sy: int, svy: int
 ) -> tuple[float, float]:
@@ -136,30 +143,47 @@ def shifted_centre(
     return (white * sx - svx) / s, (white * sy - svy) / s
 
 
-@numba.njit(cache=True)
-def _mean_shift(wins: np.ndarray, at: int, n: int, darkest: int, white: float, cx: float, cy: float,
+@numba.njit(cache=True, inline="always")
+def _row_sums(wins: np.ndarray, row: int, h: int, t: np.int64) -> tuple[int, int, int]:
+    """Over the pixels of bits ``t`` of the window row at ``wins[row:]``: the sums of their levels
+    v, offsets x (from column ``h``) and v x (the run between the lowest and the highest bit,
+    without branches: vectorised)."""
+    rv = rx = rvx = 0
+    for j in range(_lowest_bit(t), _highest_bit(t) + 1):
+        use = (t >> np.int64(j)) & _ONE
+        v, x = np.int64(wins[row + _U(j)]) * use, np.int64(j - h)
+        rv, rx, rvx = rv + v, rx + use * x, rvx + v * x
+    return rv, rx, rvx
+
+
+@numba.njit(cache=True, inline="always")
+def _mean_shift(wins: np.ndarray, at: int, n: int, words: np.ndarray, white: float, cx: float, cy: float,
                 core: float) -> tuple[float, float]:  # fmt: skip
-    """The contrast-weighted centre of the ink (levels <= ``darkest``) within ``core`` (squared
-    distance) of (cx, cy),
-    re-centred ``MEAN_SHIFT_STEPS`` times (window-relative; it stays put where there is none; a
-    step that does not move it ends the re-centring). Sums of integers: sum(w x) = W sum(x) -
-    sum(v x)."""
+    """The contrast-weighted centre of the ink (plane ``_INK`` of ``words``) within ``core``
+    (squared distance) of (cx, cy), re-centred ``MEAN_SHIFT_STEPS`` times (window-relative; it
+    stays put where there is none; a step that does not move it ends the re-centring). The
+    pixels a step takes (in plane ``_SPARE``): a step that takes those of the step before has
+    their sums, so their centre, and ends the re-centring without summing them again. Sums of
+    integers (exact, in any order): sum(w x) = W sum(x) - sum(v x)."""
     h, stride = n // 2, n + 2
-    for _ in range(MEAN_SHIFT_STEPS):
+    if not (np.isfinite(cx) and np.isfinite(cy)):
+        return cx, cy  # no pixel is taken: it stays put
+    for step in range(MEAN_SHIFT_STEPS):
+        same = step > 0
+        for i in range(1, n + 1):
+            dy = (i - 1 - h) - cy
+            t = words[_INK, i] & _within(n, h, cx, dy * dy, core)
+            same &= t == words[_SPARE, i]
+            words[_SPARE, i] = t
+        if same:  # the pixels of the step before: its centre again
+            break
         cnt = sv = sx = svx = sy = svy = 0
-        for i in range(n):
-            dy = (i - h) - cy
-            d2y = dy * dy
-            if not d2y <= core:  # no pixel of the row is within it
-                continue
-            row, rc = at + _U((i + 1) * stride + 1), 0
-            rv = rvx = rx = 0
-            for j in range(n):  # the whole row, without branches (vectorised)
-                v, dx = np.int64(wins[row + _U(j)]), (j - h) - cx
-                take, x = np.int64(v <= darkest) & np.int64(dx * dx + d2y <= core), np.int64(j - h)
-                rc, rv, rx, rvx = rc + take, rv + take * v, rx + take * x, rvx + take * v * x
-            y = np.int64(i - h)
-            cnt, sv, sx, svx, sy, svy = cnt + rc, sv + rv, sx + rx, svx + rvx, sy + rc * y, svy + rv * y
+        for i in range(1, n + 1):
+            t = words[_SPARE, i]
+            if t:
+                rv, rx, rvx = _row_sums(wins, at + _U(i * stride + 1), h, t)
+                rc, y = _popcount(t), np.int64(i - 1 - h)
+                cnt, sv, sx, svx, sy, svy = cnt + rc, sv + rv, sx + rx, svx + rvx, sy + rc * y, svy + rv * y
         ux, uy = shifted_centre(cnt, white, sv, sx, svx, sy, svy)
         if cnt == 0 or (ux == cx and uy == cy):
             break
@@ -167,29 +191,28 @@ def _mean_shift(wins: np.ndarray, at: int, n: int, darkest: int, white: float, c
     return cx, cy
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _grow(words: np.ndarray, n: int) -> tuple[int, int]:
-    """The blob (``_BLOB``): the ink within sqrt(2) of the centre (``_SPARE``: the seeds) dilated
-    (3x3) within the ink in the disc until nothing changes. Returns its first and last rows (of
-    1 .. n; none: n + 1, 0)."""
-    ink, disc, cur, nxt = words[_INK], words[_DISC], words[_SPARE], words[_BLOB]
-    start, changed = True, True
+    """The blob (plane ``_BLOB``): the ink within sqrt(2) of the centre (``_SPARE``: the seeds)
+    dilated (3x3) within the ink in the disc until nothing changes. Returns its first and last
+    rows (of 1 .. n; none: n + 1, 0)."""
+    cur, nxt, start, changed = _SPARE, _BLOB, True, True
     while changed or start:  # the seeds themselves need not be in the room
         changed = False
         for i in range(1, n + 1):
-            v = cur[i - 1] | cur[i] | cur[i + 1]
-            nxt[i] = (v | (v << _ONE) | (v >> _ONE)) & ink[i] & disc[i]
-            changed |= nxt[i] != cur[i]
+            v = words[cur, i - 1] | words[cur, i] | words[cur, i + 1]
+            words[nxt, i] = (v | (v << _ONE) | (v >> _ONE)) & words[_INK, i] & words[_DISC, i]
+            changed |= words[nxt, i] != words[cur, i]
         cur, nxt, start = nxt, cur, False
-    blob, first, last = words[_BLOB], n + 1, 0
+    first, last = n + 1, 0
     for i in range(1, n + 1):
-        blob[i] = cur[i]
-        if cur[i]:
+        words[_BLOB, i] = words[cur, i]
+        if words[cur, i]:
             first, last = min(first, i), i
     return first, last
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def measure_rows(wins: np.ndarray, at: int, n: int, darkest: int, sure_level: int, cx: float, cy: float,
                  rad: float, core: float, white: float, noise: float, nb: np.ndarray, ox: float, oy: float,
                  words: np.ndarray) -> tuple:  # fmt: skip
@@ -200,8 +223,8 @@ def measure_rows(wins: np.ndarray, at: int, n: int, darkest: int, sure_level: in
     >= n + 2) int64): ``(runs on, ink outside the disc, area, summed contrast, centroid u, v,
     weighted pixels, sum(x - u), sum((x - u)^2), sum(y - v), sum((y - v)^2))`` (window-relative)."""
     h, stride = n // 2, n + 2
-    words[:, : n + 2] = 0
-    ink, sure, disc, cell = words[_INK], words[_SURE], words[_DISC], words[_CELL]
+    for p in range(PLANES):  # the padding rows (rows 1 .. n are all written before they are read)
+        words[p, 0] = words[p, n + 1] = 0
     full = (_ONE << np.int64(n)) - _ONE
     for i in range(1, n + 1):
         row, a, b = at + _U(i * stride + 1), np.int64(0), np.int64(0)
@@ -209,7 +232,7 @@ def measure_rows(wins: np.ndarray, at: int, n: int, darkest: int, sure_level: in
             v = wins[row + _U(j)]
             a |= np.int64(v <= darkest) << np.int64(j)
             b |= np.int64(v <= sure_level) << np.int64(j)
-        ink[i], sure[i], cell[i] = a, b, full
+        words[_INK, i], words[_SURE, i], words[_CELL, i] = a, b, full
     for k in range(nb.shape[0]):  # the target's side of the valley to each touching target
         divides, vx, vy, dx, dy = valley(wins, at, stride, cx, cy, nb[k], ox, oy, noise)
         if divides:
@@ -217,42 +240,43 @@ def measure_rows(wins: np.ndarray, at: int, n: int, darkest: int, sure_level: in
                 y = (i - h) - vy
                 for j in range(n):
                     if ((j - h) - vx) * dx + y * dy > 0:
-                        cell[i + 1] &= ~(_ONE << np.int64(j))
-    cx, cy = _mean_shift(wins, at, n, darkest, white, cx, cy, core)
-    seed, r2 = words[_SPARE], rad * rad
-    for i in range(n):
-        dy = (i - h) - cy
-        j0, j1 = _span(n, h, cx, dy * dy, r2)
-        disc[i + 1] = _bits(j0, j1)
-        j0, j1 = _span(n, h, cx, dy * dy, 2.0)
-        seed[i + 1] = ink[i + 1] & _bits(j0, j1)
+                        words[_CELL, i + 1] &= ~(_ONE << np.int64(j))
+    cx, cy = _mean_shift(wins, at, n, words, white, cx, cy, core)
+    r2 = rad * rad
+    for i in range(1, n + 1):  # the disc, and the seeds: the ink within sqrt(2) of the centre
+        dy = (i - 1 - h) - cy
+        words[_DISC, i] = _within(n, h, cx, dy * dy, r2)
+        words[_SPARE, i] = words[_INK, i] & _within(n, h, cx, dy * dy, 2.0)
     first, last = _grow(words, n)
-    blob, near, grown = words[_BLOB], words[_NEAR], words[_GROWN]
-    fringe, spare = words[_FRINGE], words[_SPARE]
-    _dilate(blob, near, n)
-    grown[: n + 2] = near[: n + 2]
+    _dilate(words, _BLOB, _NEAR, n)
+    for i in range(n + 2):
+        words[_GROWN, i] = words[_NEAR, i]
     for _ in range(GROW_PX - 1):
-        spare[: n + 2] = grown[: n + 2]
-        _dilate(spare, grown, n)
+        for i in range(n + 2):
+            words[_SPARE, i] = words[_GROWN, i]
+        _dilate(words, _SPARE, _GROWN, n)
     for i in range(1, n + 1):
-        spare[i] = ink[i] & ~blob[i]
-    _dilate(spare, fringe, n)
+        words[_SPARE, i] = words[_INK, i] & ~words[_BLOB, i]
+    _dilate(words, _SPARE, _FRINGE, n)
     runs = trunc = np.int64(0)
     area = cnt = sv = sx = svx = sy = svy = npx = ax = ax2 = ay = ay2 = 0
     below = int(math.ceil(white)) - 1  # the levels with a positive contrast
     for i in range(max(first - GROW_PX - 1, 1), min(last + GROW_PX + 1, n) + 1):
-        out = near[i] & ~disc[i] & cell[i]
-        runs |= out & sure[i]
-        trunc |= out & ink[i]
-        area += _popcount(blob[i])
-        w = grown[i] & ~fringe[i] & cell[i]
+        out = words[_NEAR, i] & ~words[_DISC, i] & words[_CELL, i]
+        runs |= out & words[_SURE, i]
+        trunc |= out & words[_INK, i]
+        area += _popcount(words[_BLOB, i])
+        w = words[_GROWN, i] & ~words[_FRINGE, i] & words[_CELL, i]
+        if w == 0:
+            continue
         row, y = at + _U(i * stride + 1), np.int64(i - 1 - h)
-        rn = rx = rx2 = rc = rv = rpx = rvx = 0
-        for j in range(n if w else 0):  # the whole row, without branches (vectorised)
+        rx = rx2 = rc = rv = rpx = rvx = 0
+        for j in range(_lowest_bit(w), _highest_bit(w) + 1):  # the row's run, without branches (vectorised)
             v, x, use = np.int64(wins[row + _U(j)]), np.int64(j - h), (w >> np.int64(j)) & _ONE
             pos = use * np.int64(v <= below)
-            rn, rx, rx2 = rn + use, rx + use * x, rx2 + use * x * x
+            rx, rx2 = rx + use * x, rx2 + use * x * x
             rc, rv, rpx, rvx = rc + pos, rv + pos * v, rpx + pos * x, rvx + pos * v * x
+        rn = _popcount(w)
         npx, ax, ax2, ay, ay2 = npx + rn, ax + rx, ax2 + rx2, ay + rn * y, ay2 + rn * y * y
         cnt, sv, sx, svx, sy, svy = cnt + rc, sv + rv, sx + rpx, svx + rvx, sy + rc * y, svy + rv * y
     s = cnt * white - sv
