@@ -179,16 +179,21 @@ def _neighbours(uv: np.ndarray, kinds: np.ndarray) -> np.ndarray:
 
 def _init_state(labels: pd.DataFrame, cfg: TrackingConfig) -> _State:
     """State from one frame's labels (all detections: the unlabelled ones give the spacing)."""
-    uv_all = labels[["u_px", "v_px"]].to_numpy(np.float64)
-    own = labels[labels["id"] > 0].drop_duplicates("id").sort_values("id")
-    uv = own[["u_px", "v_px"]].to_numpy(np.float64)
-    ids = own["id"].to_numpy(np.int64)
+    # the columns as arrays (filtering the table would copy every column, the text ones too)
+    uv_all = np.stack([labels["u_px"].to_numpy(np.float64), labels["v_px"].to_numpy(np.float64)], axis=1)
+    id_all = labels["id"].to_numpy(np.int64)
+    labelled = np.nonzero(id_all > 0)[0]
+    ids, first = np.unique(id_all[labelled], return_index=True)  # each ID's first row, by ID
+    own = labelled[first]
+    uv = uv_all[own]
     if len(uv_all) >= 2:
         d, _ = cKDTree(uv_all).query(uv, k=2)
         spacing = d[:, 1]
     else:
         spacing = np.full(len(uv), np.inf)
-    radius = disc_radius(own["area_px"].to_numpy(), own["roundness"].to_numpy(), cfg.disc_margin_px)
+    radius = disc_radius(
+        labels["area_px"].to_numpy()[own], labels["roundness"].to_numpy()[own], cfg.disc_margin_px
+    )
     n, kind = len(ids), target_kind(ids)
     return _State(
         ids=ids, kind=kind, ref_uv=np.full((n, 2), np.nan), ref_mass=np.full(n, np.nan),
