@@ -124,13 +124,26 @@ def overlapping_discs(uv: np.ndarray, rad: np.ndarray, which: np.ndarray, most: 
     else:
         d, j = cKDTree(uv[live]).query(uv[which], k=k)
     d, j = d.reshape(len(which), k), live[np.minimum(j, len(live) - 1)].reshape(len(which), k)
-    touch = (d < rad[which, None] + rad[j]) & (j != which[:, None]) & (d > 0)
-    order = np.argsort(~touch, axis=1, kind="stable")[:, :most]  # the touching ones first
-    j, touch = np.take_along_axis(j, order, 1), np.take_along_axis(touch, order, 1)
-    width = j.shape[1]
-    out[:, :width, :2] = np.where(touch[:, :, None], uv[j], np.nan)
-    out[:, :width, 2] = np.where(touch, rad[j], np.nan)
+    uv, rad = np.ascontiguousarray(uv, np.float64), np.ascontiguousarray(rad, np.float64)
+    _touching(uv, rad, np.asarray(which, np.int64), np.ascontiguousarray(d), np.ascontiguousarray(j), out)
     return out
+
+
+@numba.njit(cache=True)
+def _touching(uv: np.ndarray, rad: np.ndarray, which: np.ndarray, d: np.ndarray, j: np.ndarray,
+              out: np.ndarray) -> None:  # fmt: skip
+    """Into ``out`` ((m, most, 3), NaN): for each disc ``which[q]``, the centres and radii of the
+    discs ``j[q]`` (nearest first, at distances ``d[q]``) that overlap it, in that order, at most
+    ``most``."""
+    for q in range(len(which)):
+        w, c = which[q], 0
+        for s in range(j.shape[1]):
+            if c == out.shape[1]:
+                break
+            t = j[q, s]
+            if d[q, s] < rad[w] + rad[t] and t != w and d[q, s] > 0:
+                out[q, c, 0], out[q, c, 1], out[q, c, 2] = uv[t, 0], uv[t, 1], rad[t]
+                c += 1
 
 
 @numba.njit(cache=True)
