@@ -441,27 +441,41 @@ def test_the_stripe_a_chain_can_be_is_named_by_the_membrane_around_it(kit):
             assert _which_stripe(500 - 200 * np.sin(np.deg2rad(off)), azimuth, design) == stripe, (psi, off)
 
 
+def _ring_render(kit_dir, out, **placement) -> tuple[dict, pd.DataFrame, pd.DataFrame]:
+    """A clean 13-camera, 2-frame render (seed 8) with the ring ``placement`` (SimulationConfig
+    keys) into ``out``: its true cameras, observations and points."""
+    from triaxtrack.simulate import SimulationConfig, simulate_test
+
+    cfg = SimulationConfig(cameras=13, frames=2, calibration_images=1, seed=8, **placement)
+    simulate_test(cfg, kit_dir, out, "ring", chunk_size=2)
+    truth = out / "truth"
+    return (read_cameras(truth / "cameras.json"), pd.read_parquet(truth / "observations.parquet"),
+            pd.read_parquet(truth / "points.parquet"))  # fmt: skip
+
+
+def _first_frame_labels_scored(out, name: str, cams, obs, points, kit) -> pd.DataFrame:
+    """Camera ``name``'s first-frame labels of the render in ``out``, asserted free of wrong IDs."""
+    design, table, codes = kit
+    img = read_frame(out / "videos" / f"{name}.mp4", 0)
+    labels = label_frame(img, cams[name], design, codes).assign(camera=name, frame=0)
+    df = score_identification(labels, obs, points, cams, table, design, ScoreTolerances())
+    assert df[df.metric == "wrong_ids"].value.sum() == 0, name
+    return labels
+
+
 def test_a_stripe_whose_cts_are_out_of_the_picture_is_labelled_from_its_ends(kit_dir, kit, tmp_path):
     """A close ring (300 mm, focal 0.677 x width, 71 mm high): the cell's CT bands are out of the
     picture, and the longitudinal stripes, found as straight chains, are named by the membrane
     behind them and counted from their closed ends. Zero wrong IDs, and every camera labels at least
     90 % of the stripe dots the truth sees within 60 degrees of face on (none before)."""
     from triaxtrack.score import _view_cos
-    from triaxtrack.simulate import SimulationConfig, simulate_test
 
-    design, table, codes = kit
-    cfg = SimulationConfig(cameras=13, frames=2, calibration_images=1, seed=8, camera_radius_mm=300.0,
-                           focal_factor=0.677, camera_height_mm=71.0)  # fmt: skip
-    simulate_test(cfg, kit_dir, tmp_path, "ring300", chunk_size=2)
-    cams = read_cameras(tmp_path / "truth" / "cameras.json")
-    obs = pd.read_parquet(tmp_path / "truth" / "observations.parquet")
-    points = pd.read_parquet(tmp_path / "truth" / "points.parquet")
+    table = kit[1]
+    cams, obs, points = _ring_render(kit_dir, tmp_path, camera_radius_mm=300.0, focal_factor=0.677,
+                                     camera_height_mm=71.0)  # fmt: skip
     stripes = set(table.id[table.group.str.startswith("cell_long")])
     for name in ("cam01", "cam06"):
-        img = read_frame(tmp_path / "videos" / f"{name}.mp4", 0)
-        labels = label_frame(img, cams[name], design, codes).assign(camera=name, frame=0)
-        df = score_identification(labels, obs, points, cams, table, design, ScoreTolerances())
-        assert df[df.metric == "wrong_ids"].value.sum() == 0, name
+        labels = _first_frame_labels_scored(tmp_path, name, cams, obs, points, kit)
         seen = obs[(obs.camera == name) & (obs.frame == 0) & obs.id.isin(stripes)]
         seen = seen[_view_cos(cams[name], seen.id.to_numpy(), 0, points) >= 0.5]
         assert len(seen) >= 40, name
@@ -805,21 +819,12 @@ def test_a_close_low_camera_labels_the_membrane_without_the_top_pedestal(kit_dir
     the longitudinal stripes are still seeded and fixed across the bands. Zero wrong IDs, and at
     least 95 % of the membrane dots the truth sees are labelled (measured 0.997 and 0.993; 0.89 and
     0.76 when the regions needed a top pedestal CT)."""
-    from triaxtrack.simulate import SimulationConfig, simulate_test
-
-    design, table, codes = kit
-    cfg = SimulationConfig(cameras=13, frames=2, calibration_images=1, seed=8, camera_radius_mm=260.0,
-                           focal_factor=0.75, camera_height_mm=40.0)  # fmt: skip
-    simulate_test(cfg, kit_dir, tmp_path, "close", chunk_size=2)
-    cams = read_cameras(tmp_path / "truth" / "cameras.json")
-    obs = pd.read_parquet(tmp_path / "truth" / "observations.parquet")
-    points = pd.read_parquet(tmp_path / "truth" / "points.parquet")
+    table = kit[1]
+    cams, obs, points = _ring_render(kit_dir, tmp_path, camera_radius_mm=260.0, focal_factor=0.75,
+                                     camera_height_mm=40.0)  # fmt: skip
     membrane = set(table.id[table.surface == "membrane"])
     for name in ("cam02", "cam05"):
-        img = read_frame(tmp_path / "videos" / f"{name}.mp4", 0)
-        labels = label_frame(img, cams[name], design, codes).assign(camera=name, frame=0)
-        df = score_identification(labels, obs, points, cams, table, design, ScoreTolerances())
-        assert df[df.metric == "wrong_ids"].value.sum() == 0, name
+        labels = _first_frame_labels_scored(tmp_path, name, cams, obs, points, kit)
         seen = obs[(obs.camera == name) & (obs.frame == 0) & obs.id.isin(membrane)].id
         share = seen.isin(labels.id[labels.id > 0]).mean()
         assert share >= 0.95, (name, share)
