@@ -301,8 +301,8 @@ def identify(
     _label_longitudinal(f, pool, centres, design, p)
     long_names = {s.name for s in design.cell_targets.longitudinal_stripes}
     reach, known, beside = _hide_behind_bands(f, pool, long_names, blur_px, design, gray, detect_params)
-    unseen_ct, chains, axis, pitch = _drop_unidentified_stripes(f, pool, centres, known, reach, design)
-    beside |= unseen_ct
+    beside_uncoded, chains, axis, pitch = _drop_unidentified_stripes(f, pool, centres, known, reach, design)
+    beside |= beside_uncoded
     _label_membrane(f, pool, centres, design, p)
     # a stripe beyond the membrane's silhouette is on no brighter surface than its own dots: it is
     # a straight chain among the dots the membrane leaves
