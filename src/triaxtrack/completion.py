@@ -125,16 +125,27 @@ def _inner(shape: tuple[int, ...]) -> np.ndarray:
 
 def _near_count(mask: np.ndarray) -> np.ndarray:
     """Per grid cell, the cells of ``mask`` within ``GRID_REACH`` rows and columns (itself
-    included; columns wrap around the specimen, rows do not): summed along the rows, then down
-    the columns (a box sum in 2 x 5 shifts, not 25)."""
-    mask = mask.astype(np.int64)
-    along = np.zeros(mask.shape, np.int64)
-    for dc in range(-GRID_REACH, GRID_REACH + 1):
-        along += np.roll(mask, dc, axis=1)
-    padded = np.pad(along, ((GRID_REACH, GRID_REACH), (0, 0)))
-    near = np.zeros(mask.shape, np.int64)
-    for dr in range(2 * GRID_REACH + 1):
-        near += padded[dr : dr + mask.shape[0]]
+    included; columns wrap around the specimen, rows do not): :func:`_box_count`, compiled (a
+    numpy box sum took 2 x 5 shifted copies of the grid, 0.02-0.07 ms a call, a few calls a frame)."""
+    return _box_count(np.ascontiguousarray(mask, np.bool_), GRID_REACH)
+
+
+@numba.njit(cache=True)
+def _box_count(mask: np.ndarray, reach: int) -> np.ndarray:
+    """Per cell of ``mask`` (rows, columns), the True cells within ``reach`` rows (not wrapping)
+    and columns (wrapping) of it, itself included: summed along the rows, then down the columns."""
+    rows, cols = mask.shape
+    along = np.zeros((rows, cols), np.int64)
+    for r in range(rows):
+        for c in range(cols):
+            if mask[r, c]:
+                for dc in range(-reach, reach + 1):
+                    along[r, (c + dc) % cols] += 1
+    near = np.zeros((rows, cols), np.int64)
+    for r in range(rows):
+        for dr in range(max(r - reach, 0), min(r + reach, rows - 1) + 1):
+            for c in range(cols):
+                near[r, c] += along[dr, c]
     return near
 
 

@@ -74,11 +74,26 @@ def solve3(a: np.ndarray, rhs: np.ndarray) -> None:
 
 @numba.njit(cache=True)
 def median2(buf: np.ndarray, m: int) -> tuple[float, float]:
-    """Per-axis median of the first ``m`` rows of ``buf`` (k, 2)."""
-    u, v = np.sort(buf[:m, 0]), np.sort(buf[:m, 1])
+    """Per-axis median of the first ``m`` rows of ``buf`` (k, 2): the middle value of each sorted
+    axis, or the mean of the two middle ones (NaN sorted last, as ``np.sort`` puts it), sorted
+    in place (no copies: the unwrapping takes a few hundred medians of about ten a frame)."""
+    for c in range(2):  # insertion sort of each column
+        for i in range(1, m):
+            x, j = buf[i, c], i
+            while j > 0 and _after(buf[j - 1, c], x):
+                buf[j, c] = buf[j - 1, c]
+                j -= 1
+            buf[j, c] = x
+    h = m // 2
     if m % 2:
-        return u[m // 2], v[m // 2]
-    return 0.5 * (u[m // 2 - 1] + u[m // 2]), 0.5 * (v[m // 2 - 1] + v[m // 2])
+        return buf[h, 0], buf[h, 1]
+    return 0.5 * (buf[h - 1, 0] + buf[h, 0]), 0.5 * (buf[h - 1, 1] + buf[h, 1])
+
+
+@numba.njit(cache=True)
+def _after(a: float, b: float) -> bool:
+    """Whether ``a`` sorts after ``b`` (NaN after every number)."""
+    return a > b or (np.isnan(a) and not np.isnan(b))
 
 
 @numba.njit(cache=True)
@@ -91,7 +106,7 @@ def _known_median(
     for q in range(nb.shape[1]):
         j = nb[i, q]
         if j < n and known[j]:
-            buf[m] = motion[j]
+            buf[m, 0], buf[m, 1] = motion[j, 0], motion[j, 1]
             m += 1
     if m == 0:
         return 0, np.nan, np.nan
@@ -119,7 +134,7 @@ def unwrap_motion(
     known = np.zeros(n, np.bool_)
     for i in range(n):  # the seeds: a miss within the gate is the target's own motion
         if found[i] and miss[i, 0] ** 2 + miss[i, 1] ** 2 <= tol[i] ** 2:
-            motion[i], known[i] = miss[i], True
+            motion[i, 0], motion[i, 1], known[i] = miss[i, 0], miss[i, 1], True  # not row views: slow
     seed = known.copy()
     buf = np.empty((k, 2))
     for _ in range(n):  # each round reaches the targets next to the known ones
@@ -160,8 +175,9 @@ def unwrap_motion(
 
 
 def reference_places(
-    ref_uv: np.ndarray, last_uv: np.ndarray, reported: np.ndarray, first_new: int, width_px: np.ndarray
-) -> np.ndarray:
+    ref_uv: np.ndarray, last_uv: np.ndarray, reported: np.ndarray, first_new: int, width_px: np.ndarray,
+    tree: cKDTree | None = None,
+) -> np.ndarray:  # fmt: skip
     """A copy of ``ref_uv`` (n, 2) with the reference places of the targets from ``first_new`` on
     (just taken on, seen at ``last_uv``) moved back by the displacement since the reference frame
     that the ``reported`` targets before them show there: a least-squares quadratic map of their
@@ -175,7 +191,9 @@ def reference_places(
     nearest, a dot was off their motion by its gradient over that reach (58 of 69 dots of a
     hidden patch dropped as drifting the frame after, on a test at 1 % strain); placed by their
     affine motion, by its curvature (a patch of 223 dots 3-9 spacings across: 0.3 px median,
-    1.8 px worst, against 0.07 and 0.46 px with the quadratic map)."""
+    1.8 px worst, against 0.07 and 0.46 px with the quadratic map). ``tree``: a ``cKDTree`` over
+    ``last_uv`` of the ``reported`` targets with a reference place before ``first_new``, in
+    order, if the caller has one (else it is built)."""
     ref = np.array(ref_uv, dtype=np.float64, copy=True)
     pool = np.nonzero(np.asarray(reported[:first_new], bool) & np.isfinite(ref[:first_new]).all(axis=1))[0]
     new = np.arange(first_new, len(ref))
@@ -183,7 +201,7 @@ def reference_places(
         return ref
     at = np.asarray(last_uv, np.float64)
     k = min(REFERENCE_NEIGHBOURS, len(pool))
-    dist, j = cKDTree(at[pool]).query(at[new], k=k)
+    dist, j = (cKDTree(at[pool]) if tree is None else tree).query(at[new], k=k)
     dist, j = np.asarray(dist).reshape(len(new), k), np.asarray(j).reshape(len(new), k)
     width = np.asarray(width_px, np.float64)
     disp = weighted_quadratic(at[pool], at[pool] - ref[pool], at[new], j, dist, width)

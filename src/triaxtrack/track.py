@@ -81,7 +81,7 @@ from scipy.spatial import cKDTree
 from triaxtrack.completion import Candidates, DotGrid, Found, complete_grid, grid_candidates
 from triaxtrack.nearest import crowded
 from triaxtrack.neighbour_motion import affine_flow, reference_places, unwrap_motion
-from triaxtrack.track_kernels import advance, shape_changed
+from triaxtrack.track_kernels import advance, camera_shift, shape_changed
 from triaxtrack.tracking_config import TrackingConfig
 from triaxtrack.window import WindowMeasure, disc_radius, measure_windows
 
@@ -264,14 +264,7 @@ def _camera_motion(state: _State, pred: np.ndarray, meas: WindowMeasure, gate: f
     apart: 185 observations locked one dot over); the cell-wall targets, further apart, are
     found moved."""
     wall = (state.kind == CELL_WALL) & (meas.code == _OK) & np.isfinite(state.ref_mass)
-    move = meas.uv[wall] - pred[wall]
-    near = _norm(move) <= gate * state.spacing[wall]
-    move = move[near]
-    if len(move) < MIN_WALL_TARGETS:
-        return np.zeros(2)
-    shift = np.median(move, axis=0)
-    spread = np.median(_norm(move - shift))
-    return shift if spread <= 0.25 * gate * np.median(state.spacing[wall][near]) else np.zeros(2)
+    return camera_shift(wall, meas.uv, pred, state.spacing, gate, MIN_WALL_TARGETS, 0.25)
 
 
 def _corrected_prediction(
@@ -531,12 +524,13 @@ def _adopt(state: _State, found: Found, reported: np.ndarray) -> None:
     median of their nearest reported dots'."""
     n, m = len(state.ids), len(found.ids)
     uv = found.meas.uv
-    pool = reported & (state.kind == MEMBRANE) & np.isfinite(state.ref_uv).all(axis=1)
-    pool = np.nonzero(pool)[0]
+    in_pool = reported & (state.kind == MEMBRANE) & np.isfinite(state.ref_uv).all(axis=1)
+    pool = np.nonzero(in_pool)[0]
     k = min(NEIGHBOURS, len(pool))
     disp, vel = np.zeros((m, 2)), np.zeros((m, 2))  # (disp: where too few reported to place them)
-    if k:
-        _, j = cKDTree(state.last_uv[pool]).query(uv, k=k)
+    tree = cKDTree(state.last_uv[pool]) if k else None  # also reference_places' (the same points)
+    if tree is not None:
+        _, j = tree.query(uv, k=k)
         j = pool[np.asarray(j).reshape(m, k)]
         disp = np.median(state.last_uv[j] - state.ref_uv[j], axis=1)
         vel = np.median(state.last_vel[j], axis=1)
@@ -562,6 +556,7 @@ def _adopt(state: _State, found: Found, reported: np.ndarray) -> None:
         setattr(state, name, np.concatenate([old, np.asarray(value, old.dtype)]))
     # where their reported neighbours' displacement field puts them (a smooth field: the
     # tracker's flow check compares dots taken on together with each other from the next frame)
+    reported_now = np.r_[in_pool, np.zeros(m, bool)]
     state.ref_uv = reference_places(
-        state.ref_uv, state.last_uv, np.isin(np.arange(n + m), pool), n, REFERENCE_WIDTH * found.spacing
+        state.ref_uv, state.last_uv, reported_now, n, REFERENCE_WIDTH * found.spacing, tree
     )

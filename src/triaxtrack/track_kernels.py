@@ -67,13 +67,12 @@ def shape_changed(mass: np.ndarray, smass: np.ndarray, ref: np.ndarray, sref: np
     for i in range(n):
         fresh[i] = measured[i] and blind[i] == 0
     scatter_ref, scatter_last = np.empty(2), np.empty(2)
-    every_ref = _scatter(mass, ref, fresh, min_count, mad_to_sigma)
-    every_last = _scatter(mass, last, fresh, min_count, mad_to_sigma)
     for c in range(2):
         of = fresh & (divided == (c == 1))
-        enough = of.sum() >= min_count
-        scatter_ref[c] = _scatter(mass, ref, of, min_count, mad_to_sigma) if enough else every_ref
-        scatter_last[c] = _scatter(mass, last, of, min_count, mad_to_sigma) if enough else every_last
+        if of.sum() < min_count:  # the scatter over all (only then: each takes two medians)
+            of = fresh
+        scatter_ref[c] = _scatter(mass, ref, of, min_count, mad_to_sigma)
+        scatter_last[c] = _scatter(mass, last, of, min_count, mad_to_sigma)
     out = np.zeros(n, np.bool_)
     for i in range(n):
         if not measured[i]:
@@ -129,3 +128,33 @@ def advance(uv: np.ndarray, mass: np.ndarray, smass: np.ndarray, ok: np.ndarray,
                 v = ref_uv[i, c] + flow[i, c] if valid[i] else blind_pred
                 new_pred[i, c] = v if np.isfinite(v) else blind_pred
     return new_uv, new_vel, new_mass, new_smass, new_timed, new_blind, new_since, new_pred
+
+
+@numba.njit(cache=True, error_model="numpy")
+def camera_shift(wall: np.ndarray, uv: np.ndarray, pred: np.ndarray, spacing: np.ndarray, gate: float,
+                 min_count: int, agree_share: float) -> np.ndarray:  # fmt: skip
+    """(2,) the per-axis median departure ``uv - pred`` of the targets ``wall`` (n,) within
+    ``gate`` x their ``spacing`` of their predictions, if at least ``min_count`` of them agree
+    with it: the median of their distances from it within ``agree_share`` x ``gate`` x their
+    median spacing; else zero. As numpy's masks and ``np.median`` (``track._camera_motion``)."""
+    n = len(wall)
+    mu, mv, sp = np.empty(n), np.empty(n), np.empty(n)
+    m = 0
+    for i in range(n):
+        if not wall[i]:
+            continue
+        du, dv = uv[i, 0] - pred[i, 0], uv[i, 1] - pred[i, 1]
+        if math.sqrt(du * du + dv * dv) <= gate * spacing[i]:
+            mu[m], mv[m], sp[m] = du, dv, spacing[i]
+            m += 1
+    shift = np.zeros(2)
+    if m < min_count:
+        return shift
+    su, sv = np.median(mu[:m]), np.median(mv[:m])
+    dist = np.empty(m)
+    for q in range(m):
+        du, dv = mu[q] - su, mv[q] - sv
+        dist[q] = math.sqrt(du * du + dv * dv)
+    if np.median(dist) <= agree_share * gate * np.median(sp[:m]):
+        shift[0], shift[1] = su, sv
+    return shift
