@@ -39,7 +39,7 @@ import numpy as np
 
 from triaxtrack.kit import membrane_radius, target_table
 from triaxtrack.kit_design import KitDesign
-from triaxtrack.nearest import nearest_within
+from triaxtrack.nearest import finite_rows, nearest_within
 from triaxtrack.neighbour_motion import solve3
 from triaxtrack.window import WindowMeasure
 
@@ -315,13 +315,13 @@ def complete_grid(
     measured = np.zeros(len(ids), bool)  # a blob that failed is not measured again this frame
     parts: list[tuple[np.ndarray, np.ndarray, np.ndarray, WindowMeasure]] = []  # (which, step, rad, meas)
     index, at, rad_of, mass_of = grid_index.copy(), uv, radius, mass
-    known = uv[np.isfinite(uv).all(axis=1)]
+    known = uv[finite_rows(uv)]
     for _ in range(GROWTH_ROUNDS):
         which = np.nonzero(~passed & ~measured)[0]
         pred, rms, near, step, rad, squeeze, beside = _interpolate(
             row[which], col[which], index, at, rad_of, GRID_REACH, MIN_GRID_NEIGHBOURS
         )
-        tried = np.isfinite(pred).all(axis=1) & (rms <= max_fit_px) & (squeeze >= MIN_VIEW_COS * aspect)
+        tried = finite_rows(pred) & (rms <= max_fit_px) & (squeeze >= MIN_VIEW_COS * aspect)
         if cell_uv is not None and len(cell_uv) and tried.any():  # not beside a cell band
             d, _ = nearest_within(cell_uv, np.nan_to_num(pred), BAND_REACH * near)
             tried &= d > BAND_REACH * near

@@ -22,6 +22,13 @@ CELLS_PER_POINT = 16  # cells at most per point: cells of the reach where that a
 # the reach is small against the points' spread (a few points per cell in a dense grid of dots)
 
 
+def finite_rows(a: np.ndarray) -> np.ndarray:
+    """(n,) bool: the rows of ``a`` (n, 2) with both coordinates finite, as
+    ``np.isfinite(a).all(axis=1)`` (a tenth of its time: a reduction along an axis of two is slow,
+    20 us for 1700 rows)."""
+    return np.isfinite(a[:, 0]) & np.isfinite(a[:, 1])
+
+
 def nearest_within(
     points: np.ndarray, queries: np.ndarray, reach: np.ndarray | float, *, exclude_self: bool = False
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -115,7 +122,7 @@ def overlapping_discs(uv: np.ndarray, rad: np.ndarray, which: np.ndarray, most: 
     those of the ``most`` other discs with the nearest centres that overlap it, nearest first
     (centres ``uv`` (N, 2), radii ``rad`` (N,); NaN ones are none); NaN rows where fewer do."""
     out = np.full((len(which), most, 3), np.nan)
-    live = np.nonzero(np.isfinite(uv).all(axis=1) & np.isfinite(rad))[0]
+    live = np.nonzero(finite_rows(uv) & np.isfinite(rad))[0]
     if len(live) < 2:
         return out
     k = min(most + 1, len(live))

@@ -9,6 +9,8 @@ import numba
 import numpy as np
 from scipy.spatial import cKDTree
 
+from triaxtrack.nearest import finite_rows
+
 REFERENCE_NEIGHBOURS = 200  # reported targets whose displacement places a target taken on
 
 
@@ -195,7 +197,7 @@ def reference_places(
     ``last_uv`` of the ``reported`` targets with a reference place before ``first_new``, in
     order, if the caller has one (else it is built)."""
     ref = np.array(ref_uv, dtype=np.float64, copy=True)
-    pool = np.nonzero(np.asarray(reported[:first_new], bool) & np.isfinite(ref[:first_new]).all(axis=1))[0]
+    pool = np.nonzero(np.asarray(reported[:first_new], bool) & finite_rows(ref[:first_new]))[0]
     new = np.arange(first_new, len(ref))
     if len(pool) < 6 or not len(new):  # a quadratic needs six
         return ref

@@ -79,7 +79,7 @@ import pandas as pd
 from scipy.spatial import cKDTree
 
 from triaxtrack.completion import Candidates, DotGrid, Found, complete_grid, grid_candidates
-from triaxtrack.nearest import crowded
+from triaxtrack.nearest import crowded, finite_rows
 from triaxtrack.neighbour_motion import affine_flow, reference_places, unwrap_motion
 from triaxtrack.track_kernels import advance, camera_shift, shape_changed
 from triaxtrack.tracking_config import TrackingConfig
@@ -161,6 +161,8 @@ class _State:
     blind: np.ndarray  # (n,) frames measured and not reported since it was last reported
     since: np.ndarray  # (n,) frames (of any kind) from when it was last reported to this one
     steady: int = 0  # frames in a row in which STEADY_SHARE of the targets were reported
+    median_of: np.ndarray | None = None  # the spacing array whose median is median_spacing ...
+    median_spacing: float = np.nan  # ... (:func:`_median_spacing`)
 
 
 def _neighbours(uv: np.ndarray, kinds: np.ndarray) -> np.ndarray:
@@ -292,7 +294,7 @@ def _vouchers(state: _State, vouch: np.ndarray, which: np.ndarray) -> np.ndarray
     out = np.full((n, NEIGHBOURS), n, np.int64)
     kinds = state.kind
     for kind in np.unique(kinds[which]):
-        pool = np.nonzero(vouch & (kinds == kind) & np.isfinite(state.ref_uv).all(axis=1))[0]
+        pool = np.nonzero(vouch & (kinds == kind) & finite_rows(state.ref_uv))[0]
         rows = np.nonzero(which & (kinds == kind))[0]
         if len(pool) == 0 or len(rows) == 0:
             continue
@@ -376,7 +378,7 @@ def _check_flow(
         if (check & ~off).any():  # new vouchers: the flow changes
             vouch |= check & ~off
             flow, valid = _affine_flow(state, disp, vouch)
-    far = pending & np.isfinite(state.ref_uv).all(axis=1)
+    far = pending & finite_rows(state.ref_uv)
     if far.any():  # no vouchers among its nearest: the nearest vouching ones within reach
         far_flow, far_valid = _affine_flow(state, disp, vouch, _vouchers(state, vouch, far))
         check = far & far_valid
@@ -415,6 +417,14 @@ def _advance(state: _State, meas: WindowMeasure, pred: np.ndarray, reason: np.nd
     )  # fmt: skip
 
 
+def _median_spacing(state: _State) -> float:
+    """``np.median(state.spacing)``, taken again only when the spacing array is replaced (targets
+    taken on): the same every frame in between."""
+    if state.median_of is not state.spacing:
+        state.median_of, state.median_spacing = state.spacing, float(np.median(state.spacing))
+    return state.median_spacing
+
+
 def _step(state: _State, gray: np.ndarray | None, cfg: TrackingConfig, first: bool) -> tuple:
     """Track one frame: returns (uv (n, 2), area (n,), sigma_px (n,), reason (n,): codes, indices
     in ``_NAMES``) and advances the state."""
@@ -426,7 +436,7 @@ def _step(state: _State, gray: np.ndarray | None, cfg: TrackingConfig, first: bo
     meas = measure_targets(gray, probe, state.radius, cfg)
     if not first:  # the camera's own motion (a knock), then the motion the frame shows
         shift = _camera_motion(state, pred, meas, cfg.gate)
-        if shift.any() and np.hypot(*shift) > REPREDICT_SHARE * cfg.gate * np.median(state.spacing):
+        if shift.any() and np.hypot(*shift) > REPREDICT_SHARE * cfg.gate * _median_spacing(state):
             pred = pred + shift
             meas = measure_targets(gray, probe + shift, state.radius, cfg)
         pred, meas = _corrected_prediction(state, gray, cfg, pred, meas)
@@ -502,7 +512,7 @@ def _complete(
     member = (flat >= 0) & (flat < grid.ids.size)
     index = np.full(grid.ids.size, -1, np.int64)
     index[flat[member]] = np.nonzero(member)[0]
-    reported = np.isfinite(uv).all(axis=1)
+    reported = finite_rows(uv)
     mass = np.where(reported, state.last_mass, np.nan)
     cand, found = complete_grid(
         gray, cand, index.reshape(grid.ids.shape), uv, state.radius, mass,
@@ -524,7 +534,7 @@ def _adopt(state: _State, found: Found, reported: np.ndarray) -> None:
     median of their nearest reported dots'."""
     n, m = len(state.ids), len(found.ids)
     uv = found.meas.uv
-    in_pool = reported & (state.kind == MEMBRANE) & np.isfinite(state.ref_uv).all(axis=1)
+    in_pool = reported & (state.kind == MEMBRANE) & finite_rows(state.ref_uv)
     pool = np.nonzero(in_pool)[0]
     k = min(NEIGHBOURS, len(pool))
     disp, vel = np.zeros((m, 2)), np.zeros((m, 2))  # (disp: where too few reported to place them)
