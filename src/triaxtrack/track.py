@@ -81,7 +81,7 @@ from scipy.spatial import cKDTree
 from triaxtrack.completion import Candidates, DotGrid, Found, complete_grid, grid_candidates
 from triaxtrack.nearest import crowded, finite_rows
 from triaxtrack.neighbour_motion import affine_flow, reference_places, unwrap_motion
-from triaxtrack.track_kernels import advance, camera_shift, shape_changed
+from triaxtrack.track_kernels import advance, camera_shift, found_miss, shape_changed, spread_motion
 from triaxtrack.tracking_config import TrackingConfig
 from triaxtrack.window import WindowMeasure, disc_radius, measure_windows
 
@@ -250,11 +250,10 @@ def _frame_motion(state: _State, pred: np.ndarray, meas: WindowMeasure, gate: fl
     dot spacing or more from a standing start), nothing is known and targets are dropped, never
     locked one dot over."""
     found = meas.code == _OK
-    miss = np.where(found[:, None], np.nan_to_num(meas.uv - pred), 0.0)
+    miss = found_miss(meas.uv, pred, found)
     tol = gate * state.spacing
     motion, known = unwrap_motion(miss, found, pred, state.neighbours, tol, MIN_FLOW_NEIGHBOURS)
-    seed = found & (_norm(miss) <= tol)
-    return np.where((known & ~seed)[:, None], motion, 0.0)
+    return spread_motion(motion, known, miss, found, tol)
 
 
 def _camera_motion(state: _State, pred: np.ndarray, meas: WindowMeasure, gate: float) -> np.ndarray:

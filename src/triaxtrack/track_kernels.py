@@ -7,9 +7,12 @@ NaN; a division by zero gives inf or NaN: numba's numpy error model), so the sam
 from __future__ import annotations
 
 import math
+import sys
 
 import numba
 import numpy as np
+
+_LARGEST = sys.float_info.max  # np.nan_to_num's stand-in for an infinity
 
 
 @numba.njit(cache=True, error_model="numpy")
@@ -158,3 +161,36 @@ def camera_shift(wall: np.ndarray, uv: np.ndarray, pred: np.ndarray, spacing: np
     if np.median(dist) <= agree_share * gate * np.median(sp[:m]):
         shift[0], shift[1] = su, sv
     return shift
+
+
+@numba.njit(cache=True, error_model="numpy")
+def found_miss(uv: np.ndarray, pred: np.ndarray, found: np.ndarray) -> np.ndarray:
+    """(n, 2) ``uv - pred`` of the targets ``found`` (NaN as 0, an infinity as the largest finite
+    number of its sign: ``np.nan_to_num``), else 0."""
+    n = len(uv)
+    out = np.zeros((n, 2))
+    for i in range(n):
+        if not found[i]:
+            continue
+        for c in range(2):
+            d = uv[i, c] - pred[i, c]
+            if math.isnan(d):
+                d = 0.0
+            elif math.isinf(d):
+                d = _LARGEST if d > 0 else -_LARGEST
+            out[i, c] = d
+    return out
+
+
+@numba.njit(cache=True, error_model="numpy")
+def spread_motion(motion: np.ndarray, known: np.ndarray, miss: np.ndarray, found: np.ndarray, tol: np.ndarray
+                  ) -> np.ndarray:  # fmt: skip
+    """(n, 2) the ``motion`` of the ``known`` targets that are not seeds (``found`` with their
+    ``miss`` within ``tol``: measured already), else 0."""
+    n = len(motion)
+    out = np.zeros((n, 2))
+    for i in range(n):
+        seed = found[i] and math.sqrt(miss[i, 0] * miss[i, 0] + miss[i, 1] * miss[i, 1]) <= tol[i]
+        if known[i] and not seed:
+            out[i, 0], out[i, 1] = motion[i, 0], motion[i, 1]
+    return out
