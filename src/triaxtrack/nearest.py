@@ -171,3 +171,97 @@ def _k_nearest(uv: np.ndarray, live: np.ndarray, which: np.ndarray, k: int) -> t
                     s -= 1
                 d2[q, s], j[q, s] = e, i
     return np.sqrt(d2), j
+
+
+def k_nearest(points: np.ndarray, queries: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
+    """(q, k) distances and indices of the ``k`` points (p, 2) nearest each query (q, 2), nearest
+    first: ``cKDTree(points).query(queries, k=k)`` (1 <= k <= p), the same numbers. Found in a
+    compiled grid of cells (the tree's 1600 queries of 13 neighbours took 1.6 ms, a chunk's
+    set-up); where two of a query's k + 1 nearest are equally far (their order is the tree's own)
+    or a coordinate is not finite, by the tree."""
+    pts = np.ascontiguousarray(points, np.float64).reshape(-1, 2)
+    qry = np.ascontiguousarray(queries, np.float64).reshape(-1, 2)
+    if not 1 <= k <= len(pts):
+        raise ValueError(f"k_nearest: k = {k} of {len(pts)} points")
+    if np.isfinite(pts).all() and np.isfinite(qry).all():
+        d2, j, tied = _grid_k_nearest(pts, qry, k)
+        if not tied:
+            return np.sqrt(d2), j
+    d, j = cKDTree(pts).query(qry, k=k)
+    return np.asarray(d).reshape(len(qry), k), np.asarray(j).reshape(len(qry), k)
+
+
+@numba.njit(cache=True)
+def _grid_k_nearest(pts: np.ndarray, qry: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray, bool]:
+    """:func:`k_nearest`'s squared distances (as the tree sums them: du * du + dv * dv) and
+    indices, the points binned in square cells of about two points each, each query scanning
+    rings of cells around its own until its k + 1 nearest (k where there are no more) are nearer
+    than any point beyond; and whether two of those k + 1 were equally far for some query."""
+    n, q = len(pts), len(qry)
+    m = min(k + 1, n)  # k + 1: a tie at the k-th is seen
+    u0, v0 = pts[:, 0].min(), pts[:, 1].min()
+    wu, wv = max(pts[:, 0].max() - u0, 1.0), max(pts[:, 1].max() - v0, 1.0)
+    h = max(math.sqrt(2.0 * wu * wv / n), max(wu, wv) / (4.0 * n))
+    nx, ny = int(wu / h) + 1, int(wv / h) + 1
+    cell = np.empty(n, np.int64)
+    start = np.zeros(nx * ny + 1, np.int64)
+    for t in range(n):
+        cell[t] = min(int((pts[t, 1] - v0) / h), ny - 1) * nx + min(int((pts[t, 0] - u0) / h), nx - 1)
+        start[cell[t] + 1] += 1
+    start = np.cumsum(start)
+    order, fill = np.empty(n, np.int64), start[:-1].copy()
+    for t in range(n):
+        order[fill[cell[t]]] = t
+        fill[cell[t]] += 1
+    d2, idx = np.empty((q, k)), np.empty((q, k), np.int64)
+    best, at = np.empty(m), np.empty(m, np.int64)
+    tied = False
+    for i in range(q):
+        qu, qv = qry[i, 0], qry[i, 1]
+        cx = min(max(int(math.floor((qu - u0) / h)), 0), nx - 1)
+        cy = min(max(int(math.floor((qv - v0) / h)), 0), ny - 1)
+        got = 0
+        r = 0
+        while True:
+            for y in range(cy - r, cy + r + 1):
+                if y < 0 or y >= ny:
+                    continue
+                step = 1 if y == cy - r or y == cy + r else 2 * r  # the ring's cells only
+                for x in range(cx - r, cx + r + 1, max(step, 1)):
+                    if x < 0 or x >= nx:
+                        continue
+                    c = y * nx + x
+                    for s in range(start[c], start[c + 1]):
+                        t = order[s]
+                        du, dv = qu - pts[t, 0], qv - pts[t, 1]
+                        e = du * du + dv * dv
+                        if got == m and e >= best[m - 1]:
+                            continue
+                        p = got if got < m else m - 1  # insert, keeping the m nearest in order
+                        while p > 0 and best[p - 1] > e:
+                            best[p], at[p] = best[p - 1], at[p - 1]
+                            p -= 1
+                        best[p], at[p] = e, t
+                        got = min(got + 1, m)
+            if cx - r <= 0 and cy - r <= 0 and cx + r >= nx - 1 and cy + r >= ny - 1:
+                break  # every cell scanned
+            if got == m:  # every point beyond the rings scanned is farther than reach (a side at
+                # the grid's edge has none beyond it)
+                reach = np.inf
+                if cx - r > 0:
+                    reach = min(reach, qu - (u0 + (cx - r) * h))
+                if cx + r < nx - 1:
+                    reach = min(reach, u0 + (cx + r + 1) * h - qu)
+                if cy - r > 0:
+                    reach = min(reach, qv - (v0 + (cy - r) * h))
+                if cy + r < ny - 1:
+                    reach = min(reach, v0 + (cy + r + 1) * h - qv)
+                reach -= 1e-9 * (abs(qu) + abs(qv) + h * (r + 1) + 1.0)
+                if reach > 0 and best[m - 1] < reach * reach:
+                    break
+            r += 1
+        for s in range(1, m):
+            if best[s] == best[s - 1]:
+                tied = True
+        d2[i], idx[i] = best[:k], at[:k]
+    return d2, idx, tied

@@ -79,7 +79,7 @@ import pandas as pd
 from scipy.spatial import cKDTree
 
 from triaxtrack.completion import Candidates, DotGrid, Found, complete_grid, grid_candidates
-from triaxtrack.nearest import crowded, finite_rows
+from triaxtrack.nearest import crowded, finite_rows, k_nearest
 from triaxtrack.neighbour_motion import affine_flow, reference_places, unwrap_motion
 from triaxtrack.track_kernels import advance, camera_shift, found_miss, shape_changed, spread_motion
 from triaxtrack.tracking_config import TrackingConfig
@@ -173,7 +173,7 @@ def _neighbours(uv: np.ndarray, kinds: np.ndarray) -> np.ndarray:
         if len(idx) < 2:
             continue
         k = min(NEIGHBOURS + 1, len(idx))
-        _, nb = cKDTree(uv[idx]).query(uv[idx], k=k)
+        _, nb = k_nearest(uv[idx], uv[idx], k)
         nb = idx[nb[:, 1:]]
         out[idx, : nb.shape[1]] = nb
     return out
@@ -189,7 +189,7 @@ def _init_state(labels: pd.DataFrame, cfg: TrackingConfig) -> _State:
     own = labelled[first]
     uv = uv_all[own]
     if len(uv_all) >= 2:
-        d, _ = cKDTree(uv_all).query(uv, k=2)
+        d, _ = k_nearest(uv_all, uv, 2)
         spacing = d[:, 1]
     else:
         spacing = np.full(len(uv), np.inf)
