@@ -7,9 +7,8 @@ from __future__ import annotations
 
 import numba
 import numpy as np
-from scipy.spatial import cKDTree
 
-from triaxtrack.nearest import finite_rows
+from triaxtrack.nearest import finite_rows, k_nearest
 
 REFERENCE_NEIGHBOURS = 200  # reported targets whose displacement places a target taken on
 
@@ -177,9 +176,8 @@ def unwrap_motion(
 
 
 def reference_places(
-    ref_uv: np.ndarray, last_uv: np.ndarray, reported: np.ndarray, first_new: int, width_px: np.ndarray,
-    tree: cKDTree | None = None,
-) -> np.ndarray:  # fmt: skip
+    ref_uv: np.ndarray, last_uv: np.ndarray, reported: np.ndarray, first_new: int, width_px: np.ndarray
+) -> np.ndarray:
     """A copy of ``ref_uv`` (n, 2) with the reference places of the targets from ``first_new`` on
     (just taken on, seen at ``last_uv``) moved back by the displacement since the reference frame
     that the ``reported`` targets before them show there: a least-squares quadratic map of their
@@ -193,9 +191,7 @@ def reference_places(
     nearest, a dot was off their motion by its gradient over that reach (58 of 69 dots of a
     hidden patch dropped as drifting the frame after, on a test at 1 % strain); placed by their
     affine motion, by its curvature (a patch of 223 dots 3-9 spacings across: 0.3 px median,
-    1.8 px worst, against 0.07 and 0.46 px with the quadratic map). ``tree``: a ``cKDTree`` over
-    ``last_uv`` of the ``reported`` targets with a reference place before ``first_new``, in
-    order, if the caller has one (else it is built)."""
+    1.8 px worst, against 0.07 and 0.46 px with the quadratic map)."""
     ref = np.array(ref_uv, dtype=np.float64, copy=True)
     pool = np.nonzero(np.asarray(reported[:first_new], bool) & finite_rows(ref[:first_new]))[0]
     new = np.arange(first_new, len(ref))
@@ -203,8 +199,7 @@ def reference_places(
         return ref
     at = np.asarray(last_uv, np.float64)
     k = min(REFERENCE_NEIGHBOURS, len(pool))
-    dist, j = (cKDTree(at[pool]) if tree is None else tree).query(at[new], k=k)
-    dist, j = np.asarray(dist).reshape(len(new), k), np.asarray(j).reshape(len(new), k)
+    dist, j = k_nearest(at[pool], at[new], k)
     width = np.asarray(width_px, np.float64)
     disp = weighted_quadratic(at[pool], at[pool] - ref[pool], at[new], j, dist, width)
     ref[new] = at[new] - disp

@@ -537,10 +537,9 @@ def _adopt(state: _State, found: Found, reported: np.ndarray) -> None:
     pool = np.nonzero(in_pool)[0]
     k = min(NEIGHBOURS, len(pool))
     disp, vel = np.zeros((m, 2)), np.zeros((m, 2))  # (disp: where too few reported to place them)
-    tree = cKDTree(state.last_uv[pool]) if k else None  # also reference_places' (the same points)
-    if tree is not None:
-        _, j = tree.query(uv, k=k)
-        j = pool[np.asarray(j).reshape(m, k)]
+    if k:
+        _, j = k_nearest(state.last_uv[pool], uv, k)
+        j = pool[j]
         disp = np.median(state.last_uv[j] - state.ref_uv[j], axis=1)
         vel = np.median(state.last_vel[j], axis=1)
     # neighbours: the nearest reported dots and dots taken on with it (inside a patch, the
@@ -550,8 +549,8 @@ def _adopt(state: _State, found: Found, reported: np.ndarray) -> None:
     k = min(NEIGHBOURS, len(every) - 1)
     nb_new = np.full((m, NEIGHBOURS), n + m, np.int64)
     if k:
-        _, j = cKDTree(np.r_[state.last_uv[pool], uv]).query(uv, k=k + 1)
-        nb_new[:, :k] = every[np.asarray(j).reshape(m, k + 1)[:, 1:]]
+        _, j = k_nearest(np.r_[state.last_uv[pool], uv], uv, k + 1)
+        nb_new[:, :k] = every[j[:, 1:]]
     state.neighbours = np.r_[np.where(state.neighbours >= n, n + m, state.neighbours), nb_new]
     mass, smass = found.meas.mass, found.meas.sigma_mass
     grow = {  # per new target: (field, value)
@@ -567,5 +566,5 @@ def _adopt(state: _State, found: Found, reported: np.ndarray) -> None:
     # tracker's flow check compares dots taken on together with each other from the next frame)
     reported_now = np.r_[in_pool, np.zeros(m, bool)]
     state.ref_uv = reference_places(
-        state.ref_uv, state.last_uv, reported_now, n, REFERENCE_WIDTH * found.spacing, tree
+        state.ref_uv, state.last_uv, reported_now, n, REFERENCE_WIDTH * found.spacing
     )
