@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
-from triaxtrack.nearest import crowded, nearest_within
+from triaxtrack.nearest import crowded, finite_rows, k_nearest, nearest_within
 
 
 @pytest.mark.parametrize("lattice", [False, True])
@@ -86,3 +86,34 @@ def test_overlapping_discs_are_those_of_the_nearest_that_overlap_with_or_without
         assert np.array_equal(nearest.overlapping_discs(uv, rad, which, 6), got, equal_nan=True)
     finally:
         nearest.BRUTE_FORCE_PAIRS = tree
+
+
+@pytest.mark.parametrize("kind", ["random", "lattice", "line", "far"])
+def test_k_nearest_gives_the_trees_numbers(kind):
+    """The grid of cells gives cKDTree.query's distances and indices exactly: random points, a
+    lattice (ties: the tree's own order), points on a line, queries far outside the points."""
+    rng = np.random.default_rng(5)
+    for _ in range(30):
+        n, q = int(rng.integers(1, 600)), int(rng.integers(1, 50))
+        if kind == "lattice":
+            points, queries = (
+                rng.integers(0, 25, (n, 2)).astype(float),
+                rng.integers(0, 25, (q, 2)).astype(float),
+            )
+        elif kind == "line":
+            t = rng.random(n) * 1000
+            points, queries = np.c_[t, 0.5 * t + 3], rng.random((q, 2)) * 1000
+        else:
+            points = rng.random((n, 2)) * 1280
+            queries = rng.random((q, 2)) * (1280 if kind == "random" else 20000) - (
+                0 if kind == "random" else 9000
+            )
+        k = int(rng.integers(1, min(n, 20) + 1))
+        want_d, want_j = cKDTree(points).query(queries, k=k)
+        d, j = k_nearest(points, queries, k)
+        assert (d == np.asarray(want_d).reshape(q, k)).all() and (j == np.asarray(want_j).reshape(q, k)).all()
+
+
+def test_finite_rows_are_those_with_both_coordinates_finite():
+    a = np.array([[0.0, 1.0], [np.nan, 1.0], [2.0, np.inf], [3.0, 4.0]])
+    assert finite_rows(a).tolist() == [True, False, False, True]
