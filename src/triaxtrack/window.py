@@ -65,6 +65,7 @@ from triaxtrack.window_rows import (
     MAX_COLUMNS,
     MEAN_SHIFT_STEPS,
     PLANES,
+    blob_moments,
     measure_rows,
     shifted_centre,
     valley,
@@ -276,12 +277,7 @@ def _blob_sums(wins: np.ndarray, at: int, off: np.ndarray, m: np.ndarray, grown:
         npx, ax, ax2, ay, ay2 = npx + use, ax + use * x, ax2 + use * x * x, ay + use * y, ay2 + use * y * y
         cnt, sv, sx, svx = cnt + pos, sv + pos * v, sx + pos * x, svx + pos * v * x
         sy, svy = sy + pos * y, svy + pos * v * y
-    s = cnt * white - sv
-    safe = s if s > 0 else 1.0
-    cu, cv = (white * sx - svx) / safe, (white * sy - svy) / safe
-    # offsets from the centroid: sum(x - c) and sum((x - c)^2) from sums of x and x^2
-    du, du2 = ax - npx * cu, ax2 - 2 * cu * ax + npx * cu * cu
-    dv, dv2 = ay - npx * cv, ay2 - 2 * cv * ay + npx * cv * cv
+    s, cu, cv, du, du2, dv, dv2 = blob_moments(cnt, white, sv, sx, svx, sy, svy, npx, ax, ax2, ay, ay2)
     return runs != 0, trunc != 0, area, s, cu, cv, npx, du, du2, dv, dv2
 
 

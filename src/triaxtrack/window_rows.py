@@ -144,6 +144,23 @@ def shifted_centre(
 
 
 @numba.njit(cache=True, inline="always")
+def blob_moments(
+    cnt: int, white: float, sv: int, sx: int, svx: int, sy: int, svy: int,
+    npx: int, ax: int, ax2: int, ay: int, ay2: int,
+) -> tuple[float, float, float, float, float, float, float]:  # fmt: skip
+    """A blob's summed contrast ``s``, contrast-weighted centroid (``cu``, ``cv``; as
+    :func:`shifted_centre`, 0 where ``s`` is not positive) and, over its ``npx`` pixels, the sums
+    of their offsets from it and of their squares across and down (``du, du2, dv, dv2``: from the
+    sums of x and x squared ``ax``, ``ax2`` and of y ``ay``, ``ay2``), from its integer sums."""
+    s = cnt * white - sv
+    safe = s if s > 0 else 1.0
+    cu, cv = (white * sx - svx) / safe, (white * sy - svy) / safe
+    du, du2 = ax - npx * cu, ax2 - 2 * cu * ax + npx * cu * cu
+    dv, dv2 = ay - npx * cv, ay2 - 2 * cv * ay + npx * cv * cv
+    return s, cu, cv, du, du2, dv, dv2
+
+
+@numba.njit(cache=True, inline="always")
 def _row_sums(wins: np.ndarray, row: int, h: int, t: np.int64) -> tuple[int, int, int]:
     """Over the pixels of bits ``t`` of the window row at ``wins[row:]``: the sums of their levels
     v, offsets x (from column ``h``) and v x (the run between the lowest and the highest bit,
@@ -279,10 +296,5 @@ def measure_rows(wins: np.ndarray, at: int, n: int, darkest: int, sure_level: in
         rn = _popcount(w)
         npx, ax, ax2, ay, ay2 = npx + rn, ax + rx, ax2 + rx2, ay + rn * y, ay2 + rn * y * y
         cnt, sv, sx, svx, sy, svy = cnt + rc, sv + rv, sx + rpx, svx + rvx, sy + rc * y, svy + rv * y
-    s = cnt * white - sv
-    safe = s if s > 0 else 1.0
-    cu, cv = (white * sx - svx) / safe, (white * sy - svy) / safe
-    # offsets from the centroid: sum(x - c) and sum((x - c)^2) from sums of x and x^2
-    du, du2 = ax - npx * cu, ax2 - 2 * cu * ax + npx * cu * cu
-    dv, dv2 = ay - npx * cv, ay2 - 2 * cv * ay + npx * cv * cv
+    s, cu, cv, du, du2, dv, dv2 = blob_moments(cnt, white, sv, sx, svx, sy, svy, npx, ax, ax2, ay, ay2)
     return runs != 0, trunc != 0, area, s, cu, cv, npx, du, du2, dv, dv2
