@@ -158,6 +158,28 @@ def _spanned(side: np.ndarray, reach: int) -> bool:
     return (side[reach - 1] > 0 and side[reach - 2] > 0) or (side[reach + 1] > 0 and side[reach + 2] > 0)
 
 
+@numba.njit(cache=True, inline="always")
+def _grid_neighbours(
+    where: np.ndarray, r0: int, c0: int, reach: int, nj: np.ndarray, ndr: np.ndarray, ndc: np.ndarray
+) -> int:
+    """Into ``nj``, ``ndr``, ``ndc``: the dots (indices in ``where`` (rows, columns), -1: none)
+    within ``reach`` rows and columns of node (``r0``, ``c0``), not itself, row by row, with their
+    row and column offsets (columns wrap around the specimen, rows end); returns how many."""
+    rows, cols = where.shape
+    k = 0
+    for dr in range(-reach, reach + 1):
+        r = r0 + dr
+        if r < 0 or r >= rows:
+            continue
+        for dc in range(-reach, reach + 1):
+            j = where[r, (c0 + dc) % cols]
+            if (dr == 0 and dc == 0) or j < 0:
+                continue
+            nj[k], ndr[k], ndc[k] = j, dr, dc
+            k += 1
+    return k
+
+
 @numba.njit(cache=True)
 def _interpolate(
     row: np.ndarray, col: np.ndarray, where: np.ndarray, uv: np.ndarray, radius: np.ndarray, reach: int,
@@ -174,7 +196,6 @@ def _interpolate(
     columns needs the one beside it in its row: its own column step is measured from it, and
     :func:`_row_goes_on` steps on from it)."""
     m = len(row)
-    rows, cols = where.shape
     pred = np.full((m, 2), np.nan)
     rms, near, rad, squeeze = np.full(m, np.nan), np.full(m, np.nan), np.full(m, np.nan), np.full(m, np.nan)
     step = np.full(m, np.nan)
@@ -182,6 +203,7 @@ def _interpolate(
     size = (2 * reach + 1) ** 2
     du, dv, uu, vv = np.empty(size), np.empty(size), np.empty(size), np.empty(size)
     beside = np.full((m, 3), np.nan)
+    nj, ndr, ndc = np.empty(size, np.int64), np.empty(size, np.int64), np.empty(size, np.int64)
     side = np.zeros(2 * reach + 1, np.int64)  # reported dots per row offset
     cside = np.zeros(2 * reach + 1, np.int64)  # reported dots per column offset
     for i in range(m):
@@ -189,24 +211,19 @@ def _interpolate(
         k = 0
         side[:], cside[:] = 0, 0
         big = 0.0
-        for dr in range(-reach, reach + 1):
-            r = row[i] + dr
-            if r < 0 or r >= rows:
+        for t in range(_grid_neighbours(where, row[i], col[i], reach, nj, ndr, ndc)):
+            j, dr, dc = nj[t], ndr[t], ndc[t]
+            if not np.isfinite(uv[j, 0]):
                 continue
-            for dc in range(-reach, reach + 1):
-                c = col[i] + dc
-                j = where[r, c if 0 <= c < cols else c % cols]  # columns wrap around
-                if (dr == 0 and dc == 0) or j < 0 or not np.isfinite(uv[j, 0]):
-                    continue
-                du[k], dv[k], uu[k], vv[k] = dr, dc, uv[j, 0], uv[j, 1]
-                if dr == 0 and dc == -1:
-                    at_left = j
-                if dr == 0 and dc == 1:
-                    at_right = j
-                k += 1
-                side[dr + reach] += 1
-                cside[dc + reach] += 1
-                big = max(big, radius[j])
+            du[k], dv[k], uu[k], vv[k] = dr, dc, uv[j, 0], uv[j, 1]
+            if dr == 0 and dc == -1:
+                at_left = j
+            if dr == 0 and dc == 1:
+                at_right = j
+            k += 1
+            side[dr + reach] += 1
+            cside[dc + reach] += 1
+            big = max(big, radius[j])
         if k < min_count or not (_spanned(side, reach) and _spanned(cside, reach)):
             continue
         sr = sc = srr = src = scc = 0.0
@@ -382,22 +399,18 @@ def _neighbour_log_mass(
     that have a finite ``mass`` (indexed by ``where``; columns wrap around); NaN where fewer than
     ``MIN_MASS_NEIGHBOURS``."""
     m = len(row)
-    rows, cols = where.shape
+    cols = where.shape[1]
     centre, spread = np.full(m, np.nan), np.full(m, np.nan)
     vals = np.empty((2 * reach + 1) ** 2)
+    nj, ndr, ndc = np.empty(len(vals), np.int64), np.empty(len(vals), np.int64), np.empty(len(vals), np.int64)
     for i in range(m):
         k = 0
-        for dr in range(-reach, reach + 1):
-            r = row[i] + dr
-            if r < 0 or r >= rows:
+        for t in range(_grid_neighbours(where, row[i], col[i], reach, nj, ndr, ndc)):
+            j = nj[t]
+            if not np.isfinite(mass[j]) or mass[j] <= 0:
                 continue
-            for dc in range(-reach, reach + 1):
-                c = (col[i] + dc) % cols
-                j = where[r, c]
-                if (dr == 0 and dc == 0) or j < 0 or not np.isfinite(mass[j]) or mass[j] <= 0:
-                    continue
-                vals[k] = np.log(mass[j] / size[r, c])
-                k += 1
+            vals[k] = np.log(mass[j] / size[row[i] + ndr[t], (col[i] + ndc[t]) % cols])
+            k += 1
         if k < MIN_MASS_NEIGHBOURS:
             continue
         med = np.median(vals[:k])
