@@ -374,17 +374,23 @@ def test_a_stripes_steps_are_counted_and_what_lies_in_line_past_its_ends_left_ou
 
 
 def _stripe_image(
-    n: int, end_margin_px: float, occluder_from_px: float | None = None, band_from_px: int = 8
+    n: int,
+    end_margin_px: float,
+    occluder_from_px: float | None = None,
+    band_from_px: int = 8,
+    tilt: float = 0.0,
 ) -> tuple[np.ndarray, np.ndarray]:
     """A white band (200, 24 px wide) down a dark background (30) with ``n`` dots (ink 20, radius
-    4 px) 16 px apart from v = 20, the band ending ``end_margin_px`` below the last dot; a dark
-    occluder from ``occluder_from_px`` below the last dot on; the band from row ``band_from_px``.
-    Returns the image and the dots."""
+    4 px) 16 px apart from v = 20, the band ending ``end_margin_px`` below the last dot on its
+    middle, on a line ``tilt`` (rows down per column right) across it; a dark occluder from
+    ``occluder_from_px`` below the last dot on; the band from row ``band_from_px``. Returns the
+    image and the dots."""
     img = np.full((200, 80), 30.0)
     last = 20 + 16 * (n - 1)
-    img[band_from_px : int(last + end_margin_px), 28:52] = 200.0
-    uv = np.array([(40.0, 20.0 + 16 * k) for k in range(n)])
     yy, xx = np.mgrid[:200, :80]
+    band = (xx >= 28) & (xx < 52) & (yy >= band_from_px) & (yy < last + end_margin_px + tilt * (xx - 40))
+    img[band] = 200.0
+    uv = np.array([(40.0, 20.0 + 16 * k) for k in range(n)])
     for u, v in uv:
         img[(xx - u) ** 2 + (yy - v) ** 2 <= 16] = 20.0
     if occluder_from_px is not None:
@@ -393,21 +399,24 @@ def _stripe_image(
 
 
 def test_a_stripes_end_is_closed_where_its_band_ends_beside_its_last_dot():
-    """An end whose band stops past its last dot (as printed: 12 px here, under a spacing of 16) is
-    closed; where the chain stops one dot short (a dot missed), the band runs on beside that dot:
-    open; where an occluder hides the band right past the dot, beside it too: open; where the next
-    dot would fall outside the picture: cut, if the band is white beside the dot (open for a dot in
-    line past the band's end)."""
+    """An end whose band stops past its last dot where it is printed to (12 px here, 0.75 of a
+    spacing of 16) is closed, also where that end is seen tilted; where the chain stops one dot
+    short (a dot missed), the band runs on beside that dot: open; where an occluder hides the band
+    right past the dot, beside it too, or from a place the band is not printed to end at: open;
+    where the next dot would fall outside the picture: cut, if the band is white beside the dot
+    (open for a dot in line past the band's end)."""
     img, uv = _stripe_image(8, 12.0)
     down = np.array([0.0, 16.0])
-    state = lambda k, im=img: _end_state(im, uv[k], down, 7.0, 200.0, 20.0)  # noqa: E731
+    state = lambda k, im=img: _end_state(im, uv[k], down, 7.0, 200.0, 20.0, 0.75)  # noqa: E731
     assert state(7) == "closed"
     assert state(6) == "open"  # the last dot missed
-    assert _end_state(img, uv[0], -down, 7.0, 200.0, 20.0) == "cut"  # its next one at v = 4
+    for tilt in (-0.8, 0.8):  # 39 degrees: beside the dot, the band ends 6.4 px past it on one side
+        assert state(7, _stripe_image(8, 12.0, tilt=tilt)[0]) == "closed"
+    assert _end_state(img, uv[0], -down, 7.0, 200.0, 20.0, 0.75) == "cut"  # its next one at v = 4
     off_band, _ = _stripe_image(8, 12.0, band_from_px=30)  # the first dot past the band's end
-    assert _end_state(off_band, uv[0], -down, 7.0, 200.0, 20.0) == "open"
-    hidden, _ = _stripe_image(8, 12.0, occluder_from_px=-11.0)  # from 5 px past the seventh dot
-    assert _end_state(hidden, uv[6], down, 7.0, 200.0, 20.0) == "open"
+    assert _end_state(off_band, uv[0], -down, 7.0, 200.0, 20.0, 0.75) == "open"
+    assert state(6, _stripe_image(8, 12.0, occluder_from_px=-11.0)[0]) == "open"  # from 5 px past the 7th
+    assert state(6, _stripe_image(8, 12.0, occluder_from_px=-7.0)[0]) == "open"  # 9 px past: 0.56 step
 
 
 def test_the_stripe_a_chain_can_be_is_named_by_the_membrane_around_it(kit):

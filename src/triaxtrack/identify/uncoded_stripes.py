@@ -12,15 +12,18 @@ picture holds name them instead:
   grows as the radius falls, and refraction into the water bends the ray towards the axis), so
   the stripe seen lies within ``MAX_VIEW_DEG`` of psi, on the side its image is on; the stripes
   are 120 degrees apart, and exactly one must fit.
-* **Which dot**: the stripe's ends. Its white band ends ``band_margin`` beyond its end dots (the
-  printed label's edge). An end is *closed* where, one spacing beyond its last dot, the band's
-  white is gone across the band's whole width, while half a spacing beyond, beside the dot, the
-  band is still white: a missed dot there leaves the band white beside it, an occluder hides the
-  band beside the last dot too. The gaps between the chain's dots are counted in the stripe's
-  spacing (varying linearly along the chain, as perspective makes it), each a whole number of
-  steps. The stripe is labelled from a closed end; when both are closed, or both cut by the
-  frame's border with its band white beside the dot at each, only with the stripe's count of
-  steps between them.
+* **Which dot**: the stripe's ends. Its white band ends ``band_margin`` beyond its end dots'
+  edges (the printed label's edge; ``(band_margin + dot radius) / spacing`` steps past an end
+  dot's centre). An end is *closed* where the band's white is gone, one spacing beyond its last
+  dot, across the band's whole width (a missed dot there leaves the band white beside it), where
+  the band is white beside the dot (an occluder hides it there too) and where, down the stripe's
+  middle, the band ends where it is printed to end, within ``END_TOLERANCE`` steps (an
+  occluder's edge is anywhere). Seen obliquely, the printed end is tilted in the image, so each
+  line across the band finds it at its own distance; down the middle it is at the printed one.
+  The gaps between the chain's dots are counted in the stripe's spacing (varying linearly along
+  the chain, as perspective makes it), each a whole number of steps. The stripe is labelled from
+  a closed end; when both are closed, or both cut by the frame's border with its band white
+  beside the dot at each, only with the stripe's count of steps between them.
 """
 
 from __future__ import annotations
@@ -40,6 +43,10 @@ MIN_MEMBRANE_DOTS = 50  # labelled membrane dots to fit the camera's azimuth fro
 # steps off, its Eq. 1 dot 7 mm beyond 2.22)
 STEP_TOLERANCE = 0.1
 END_REACH = 1.15  # steps out from a stripe's end dot within which its band's end is seen
+# steps: down its middle, a band's end is seen this close to where it is printed (a blur sigma is
+# about 0.1 step at 720p: 1 px in 9; the white and dark levels the crossing is judged between
+# are measured to a few grey levels)
+END_TOLERANCE = 0.15
 BORDER_PX = 2.0  # a next dot within this (plus its radius) of the frame's border is out of it
 GATE = 0.3  # a dot grown onto a stripe lies within this fraction of a spacing of its prediction
 MAX_WALK = 200  # steps walked beyond a chain's end, at most (a stripe has 60 dots)
@@ -112,18 +119,18 @@ def _steps(t: np.ndarray) -> tuple[int, int, np.ndarray] | None:
 
 
 def _end_state(
-    gray: np.ndarray, uv: np.ndarray, step: np.ndarray, beside: float, white: float, ink: float
+    gray: np.ndarray, uv: np.ndarray, step: np.ndarray, beside: float, white: float, ink: float, end_at: float
 ) -> str:
     """'closed', 'cut' or 'open': the end of a stripe at its last dot ``uv`` (distorted pixels),
     ``step`` one spacing outwards (distorted pixels), its band ``white`` and its ink ``ink`` (grey
-    levels): 'cut' where the next dot would be outside the frame and the band is white beside
-    this one (it is a stripe's dot, not one in line past its end); 'closed' where, on three lines
-    outwards (through the dot and ``beside`` pixels either side of it, on the band beside the dot),
-    the grey level falls below half-way from the band's white to the ink before the next
-    dot's place is passed (``END_REACH`` steps out), and the two beside the dot start on the
-    band's white (its printed end is a circle round the cell: seen obliquely, its image is tilted,
-    so each line finds it at its own distance); a dot missed there leaves the band white beside
-    it, an occluder hides the band beside the last dot too."""
+    levels), its band printed to end ``end_at`` steps past the dot's centre: 'cut' where the next
+    dot would be outside the frame and the band is white beside this one (it is a stripe's dot,
+    not one in line past its end); 'closed' where, on three lines outwards (through the dot and
+    ``beside`` pixels either side of it, on the band beside the dot), the grey level falls below
+    half-way from the band's white to the ink before the next dot's place is passed
+    (``END_REACH`` steps out), the two beside the dot start on the band's white, and the middle
+    one, white past the dot (half a step out), falls there within ``END_TOLERANCE`` steps of
+    ``end_at``."""
     h, w = gray.shape
     nxt = uv + step
     reach = beside + BORDER_PX
@@ -135,12 +142,21 @@ def _end_state(
             gray.astype(np.float32), [sides[:, 1], sides[:, 0]], order=1, mode="nearest"
         )
         return "cut" if (on_band > mid).all() else "open"
-    s = np.arange(0.5, END_REACH + 1e-9, 0.05)
+    s = np.arange(0.0, END_REACH + 1e-9, 0.05)
     pts = uv + s[None, :, None] * step + np.array([-1.0, 0.0, 1.0])[:, None, None] * across  # (line, s, 2)
     grey = map_coordinates(gray.astype(np.float32), [pts[..., 1].ravel(), pts[..., 0].ravel()], order=1,
                            mode="nearest").reshape(3, len(s))  # fmt: skip
-    ends = (grey < mid).any(axis=1).all()
-    return "closed" if ends and (grey[[0, 2], 0] > mid).all() else "open"
+    sides = grey[[0, 2]]
+    if not ((sides[:, 0] > mid).all() and (sides < mid).any(axis=1).all()):
+        return "open"
+    past = grey[1, s >= 0.5 - 1e-9]  # down the middle, from half a step out (clear of the dot)
+    s_past = s[s >= 0.5 - 1e-9]
+    dark = np.nonzero(past < mid)[0]
+    if past[0] <= mid or not len(dark):
+        return "open"
+    k = int(dark[0])  # the first sample below half-way: the crossing between it and the one before
+    at = s_past[k - 1] + (s_past[k] - s_past[k - 1]) * (past[k - 1] - mid) / (past[k - 1] - past[k])
+    return "closed" if abs(at - end_at) <= END_TOLERANCE else "open"
 
 
 def _band_white(gray: np.ndarray, uv: np.ndarray) -> float:
@@ -231,6 +247,8 @@ def label_uncoded_stripes(
         if j is None or j in done or (f.ids[core] != UNLABELLED).any():  # labelled (from its CT, a chain)
             continue
         ls = stripes[j]
+        spacing = (cell.longitudinal_z_top - cell.longitudinal_z_bottom) / (ls.count - 1)  # mm
+        end_at = (cell.band_margin + cell.longitudinal_dot_diameter / 2) / spacing  # steps past an end dot
         core = core[np.argsort(f.pos[core] @ axis)]  # top first: the stripe's IDs increase downwards
         along = f.pos[core[-1]] - f.pos[core[0]]
         kept = _steps(f.pos[core] @ (along / np.linalg.norm(along)))
@@ -250,8 +268,8 @@ def label_uncoded_stripes(
         white = _band_white(gray, uv)
         ink = white - float(np.median(contrast[chain]))
         beside = (0.5 + margin / 2) * wd  # half-way across the band's margin beside a dot
-        top = _end_state(gray, uv[0], (uv[0] - uv[1]) / (at[1] - at[0]), beside, white, ink)
-        bottom = _end_state(gray, uv[-1], (uv[-1] - uv[-2]) / (at[-1] - at[-2]), beside, white, ink)
+        top = _end_state(gray, uv[0], (uv[0] - uv[1]) / (at[1] - at[0]), beside, white, ink, end_at)
+        bottom = _end_state(gray, uv[-1], (uv[-1] - uv[-2]) / (at[-1] - at[-2]), beside, white, ink, end_at)
         whole = at[-1] == ls.count - 1  # as many places as the stripe has dots
         if top == "closed" and (bottom != "closed" or whole) or (top == bottom == "cut" and whole):
             index = at
