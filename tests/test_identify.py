@@ -669,6 +669,39 @@ def test_larger_dots_found_where_dot_size_falls_across_the_region():
     assert _grid_phase(grid, np.asarray(area), IdentifyParams()) == (1, 2)
 
 
+def _strip(rows: int, cols: int, larger: set, rng: np.random.Generator, noise: float = 0.07) -> tuple:
+    """A grid of ``rows`` x ``cols`` dots of area 20 (log-normal scatter ``noise``), the nodes
+    ``larger`` 1.7 times as large."""
+    grid, area = {}, []
+    for i in range(rows):
+        for j in range(cols):
+            grid[(i, j)] = len(area)
+            area.append(20.0 * (1.7 if (i, j) in larger else 1.0) * np.exp(noise * rng.standard_normal()))
+    return grid, np.asarray(area)
+
+
+def test_two_larger_dots_far_out_of_the_noise_give_a_strips_phase():
+    """A strip two columns wide and 10 rows long beside a band holds two larger dots (rows 2 and
+    6 of column 0, every fourth: phase (2, 0)): they stand some ten standard errors out, so they
+    fix its phase; where one of the class is no larger (a single larger dot), or only a little,
+    or in a region of noise alone, there is none; a large region's phase stands with two of its
+    larger dots partly hidden."""
+    rng = np.random.default_rng(3)
+    p = IdentifyParams()
+    found = [_grid_phase(*_strip(10, 2, {(2, 0), (6, 0)}, rng), p) for _ in range(20)]
+    assert found.count((2, 0)) >= 19 and set(found) <= {(2, 0), None}
+    assert _grid_phase(*_strip(10, 2, {(2, 0)}, rng), p) is None
+    grid, area = _strip(10, 2, {(2, 0)}, rng, noise=0.0)
+    area[grid[(6, 0)]] *= 1.05  # the class's mean pulled up by one dot, the other barely larger
+    assert _grid_phase(grid, area, p) is None
+    assert all(_grid_phase(*_strip(30, 8, set(), rng), p) is None for _ in range(20))
+    larger = {(i, j) for i in range(1, 30, 4) for j in range(2, 8, 4)}  # phase (1, 2)
+    grid, area = _strip(30, 8, larger, rng)
+    for node in ((5, 2), (13, 6)):  # two of them partly hidden, no larger than the rest
+        area[grid[node]] /= 1.7
+    assert _grid_phase(grid, area, p) == (1, 2)
+
+
 @pytest.fixture(scope="module")
 def hd_test(kit_dir, tmp_path_factory):
     """3 cameras x 2 frames at 1280 x 720 (the demo's size), 8 % axial strain at frame 1."""

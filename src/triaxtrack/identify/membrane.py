@@ -27,12 +27,21 @@ from triaxtrack.identify.grid import NEIGHBOURS, _grow_region, _Pool, ellipse_ra
 from triaxtrack.identify.state import UNLABELLED, IdentifyParams, _assign, _Frame
 from triaxtrack.kit_design import KitDesign, MembraneDesign
 
+PHASE_SIGMAS = 5.0  # the larger dots' class stands out from the others by this many standard errors
+STAND_OUT = 0.75  # ... and this share of its dots (two at least) each stand out from them
+
 
 def _grid_phase(grid: dict, area: np.ndarray, p: IdentifyParams) -> tuple[int, int] | None:
-    """(row, col) residues mod 4 of the larger dots, from each dot's area over its neighbours'."""
+    """(row, col) residues mod 4 of the larger dots, from each dot's log area over its
+    neighbours'. The class of the larger dots must stand out from the next best by
+    ``phase_margin``, from the other classes' dots together by ``PHASE_SIGMAS`` standard errors
+    of the difference of means (the scatter pooled within the classes; one class of 16 out by 5
+    by chance: about 5e-6), and ``STAND_OUT`` of its dots (two at least) each from them by half
+    ``phase_margin``: so two larger dots fix a strip two columns wide beside a band where they
+    stand far out of the noise, and neither a region's noise nor one outlier is read as a phase
+    (while a few larger dots partly hidden or merged do not hide a region's)."""
     la = {node: np.log(area[k]) for node, k in grid.items()}
-    sums = np.zeros((4, 4))
-    counts = np.zeros((4, 4))
+    excess: list[list[float]] = [[] for _ in range(16)]
     for (i, j), v in la.items():
         # only opposite neighbours in pairs: the dots' size changes across the image (towards a
         # silhouette, along the axis) and a pair's mean cancels that change to first order
@@ -42,14 +51,25 @@ def _grid_phase(grid: dict, area: np.ndarray, p: IdentifyParams) -> tuple[int, i
             if (i - di, j - dj) in la and (i + di, j + dj) in la
         ]
         if nb:
-            sums[i % 4, j % 4] += v - np.mean(nb)
-            counts[i % 4, j % 4] += 1
-    mean = np.where(counts > 0, sums / np.maximum(counts, 1), -np.inf)
-    order = np.argsort(mean.ravel())[::-1]
-    best, second = mean.ravel()[order[0]], mean.ravel()[order[1]]
-    if counts.ravel()[order[0]] < 3 or best - second < p.phase_margin:
+            excess[4 * (i % 4) + j % 4].append(v - float(np.mean(nb)))
+    counts = np.array([len(e) for e in excess])
+    mean = np.array([np.mean(e) if e else -np.inf for e in excess])
+    order = np.argsort(mean)[::-1]
+    b = order[0]
+    rest = np.concatenate([np.asarray(e) for k, e in enumerate(excess) if k != b and e] or [np.zeros(0)])
+    if counts[b] < 2 or len(rest) < 2 or mean[b] - mean[order[1]] < p.phase_margin:
         return None
-    return int(order[0] // 4), int(order[0] % 4)
+    out = np.asarray(excess[b]) - rest.mean() >= 0.5 * p.phase_margin
+    if out.sum() < max(2, STAND_OUT * len(out)):
+        return None  # the class's mean an outlier's: too few of its dots larger
+    spread = np.concatenate([np.asarray(e) - np.mean(e) for e in excess if len(e) >= 2])
+    dof = len(spread) - int((counts >= 2).sum())
+    if dof < 2:
+        return None
+    sigma = float(np.sqrt(np.sum(spread**2) / dof))
+    if mean[b] - rest.mean() < PHASE_SIGMAS * sigma * np.sqrt(1 / counts[b] + 1 / len(rest)):
+        return None
+    return int(b // 4), int(b % 4)
 
 
 def _label_membrane(f: _Frame, pool: _Pool, centres: dict, design: KitDesign, p: IdentifyParams) -> None:
