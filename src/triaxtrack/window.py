@@ -384,8 +384,8 @@ def _measure_all(g: np.ndarray, uv: np.ndarray, rad: np.ndarray, ink_fraction: f
     white, noise, s_white = np.full(n, np.nan), np.full(n, np.nan), np.zeros(n)
     for k, t in enumerate(sel):
         y0, x0, ring_r2 = centre[t, 1] - half[t], centre[t, 0] - half[t], (rad[t] + ANNULUS_GAP_PX) ** 2
-        copy_window(g, y0, x0, sizes[k], ring_r2, hist, wins, _U(start[k]), inner)
-        white[t], noise[t], s_white[t] = levels(hist, sizes[k])
+        top = copy_window(g, y0, x0, sizes[k], ring_r2, hist, wins, _U(start[k]), inner)
+        white[t], noise[t], s_white[t] = levels(hist, sizes[k], top)
     out = np.full((n, 2), np.nan), np.zeros(n), np.zeros(n), np.zeros(n), np.full(n, np.nan)
     if m == 0:
         return out + (white, noise, code, frame_noise)

@@ -23,11 +23,11 @@ _U = np.uint64  # unsigned indices (numba then leaves out the wrap-around of neg
 
 
 @numba.njit(cache=True, inline="always")
-def _largest(hist: np.ndarray, at: int, k: int) -> tuple[int, int]:
+def _largest(hist: np.ndarray, at: int, k: int, top: int) -> tuple[int, int]:
     """The ``k``-th and ``k + 1``-th largest (from 0) grey levels counted in the histogram
-    ``hist[at:at + 256]``."""
+    ``hist[at:at + 256]``, none of them above ``top``."""
     seen, first = 0, -1
-    for v in range(255, -1, -1):
+    for v in range(top, -1, -1):
         seen += hist[at + v]
         if first < 0 and seen > k:
             first = v
@@ -43,13 +43,13 @@ def _lerp(a: float, b: float, gamma: float) -> float:
 
 
 @numba.njit(cache=True, inline="always")
-def _white_band(hist: np.ndarray, count: int) -> tuple[float, float]:
+def _white_band(hist: np.ndarray, count: int, top: int) -> tuple[float, float]:
     """numpy.percentile's (method 'linear') ``WHITE_BAND`` percentiles of the ``count`` >= 2 levels
-    of the window's histograms (:func:`copy_window`), in one scan down from 255."""
+    of the window's histograms (:func:`copy_window`), in one scan down from ``top``, the brightest."""
     at_lo, at_hi = (count - 1) * (WHITE_BAND[0] / 100.0), (count - 1) * (WHITE_BAND[1] / 100.0)
     k_hi, k_lo = count - 2 - int(math.floor(at_hi)), count - 2 - int(math.floor(at_lo))  # from the top
     seen, v_hi, v_hi1, v_lo = 0, -1, -1, -1
-    for v in range(255, -1, -1):
+    for v in range(top, -1, -1):
         seen += hist[v] + hist[v + 256]
         if v_hi < 0 and seen > k_hi:
             v_hi = v
@@ -80,49 +80,55 @@ def _inner_columns(ring_r2: float, h: int, inner: np.ndarray) -> None:
 def copy_window(
     g: np.ndarray, y0: int, x0: int, n: int, ring_r2: float, hist: np.ndarray, wins: np.ndarray, at: int,
     inner: np.ndarray,
-) -> None:  # fmt: skip
+) -> int:  # fmt: skip
     """Copy the ``n`` x ``n`` window at (``x0``, ``y0``) of the frame ``g`` into ``wins`` from
     ``at`` (padded: :func:`_geometry`; the padding 255) and count its levels in ``hist`` (768):
     two interleaved histograms of the window (a run of one level does not wait on itself), then
     the annulus's (pixels beyond ``ring_r2``, squared distance from the centre; ``inner``:
-    scratch for :func:`_inner_columns`)."""
+    scratch for :func:`_inner_columns`). Returns the window's brightest level: the scans of
+    :func:`levels` start there, not at 255 (the surface of a test is some way below it, and the
+    bins above are empty)."""
     for v in range(768):  # (in place: a slice would count references)
         hist[v] = 0
     h, stride = n // 2, _U(n + 2)
     _inner_columns(ring_r2, h, inner)
     for q in range(stride * stride):
         wins[at + q] = 255
+    top = 0
     for i in range(n):
         y, row = _U(y0 + i), at + _U(i + 1) * stride + _U(1)
-        for j in range(_U(n)):
+        for j in range(_U(n)):  # the copy and the maximum apart from the counting: on vectors
             v = g[y, _U(x0) + j]
             wins[row + j] = v
-            hist[_U(v) + ((j & _U(1)) << _U(8))] += 1
+            top = max(top, v)
+        for j in range(_U(n)):
+            hist[_U(wins[row + j]) + ((j & _U(1)) << _U(8))] += 1
         c = inner[abs(i - h)]  # the annulus: the columns farther than this from the centre's
         left, right = (h - c, h + c + 1) if c >= 0 else (n, n)
         for j in range(_U(left)):
             hist[_U(512) + _U(wins[row + j])] += 1
         for j in range(_U(right), _U(n)):
             hist[_U(512) + _U(wins[row + j])] += 1
+    return int(top)
 
 
 @numba.njit(cache=True, inline="always")
-def levels(hist: np.ndarray, n: int) -> tuple[float, float, float]:
+def levels(hist: np.ndarray, n: int, top: int) -> tuple[float, float, float]:
     """The white level, noise (before it is held to the frame's) and the white level's
-    uncertainty (module docstring) of an ``n`` x ``n`` window from its histograms (:func:`copy_window`):
-    exact percentiles and median."""
-    lo, hi = _white_band(hist, n * n)
+    uncertainty (module docstring) of an ``n`` x ``n`` window from its histograms (:func:`copy_window`),
+    ``top`` its brightest level: exact percentiles and median."""
+    lo, hi = _white_band(hist, n * n, top)
     total = band = 0
     for v in range(int(math.ceil(lo)), int(math.floor(hi)) + 1):
         total += v * (hist[v] + hist[v + 256])
         band += hist[v] + hist[v + 256]
     white = total / max(band, 1)
     cnt = 0  # the annulus's levels >= white, and the median of (level - white) over them
-    for v in range(int(math.ceil(white)), 256):
+    for v in range(int(math.ceil(white)), top + 1):
         cnt += hist[512 + v]
     noise = 0.0
     if cnt > 0:
-        hi_v, lo_v = _largest(hist, 512, cnt - 1 - cnt // 2)  # sorted: (cnt - 1) // 2-th, next
+        hi_v, lo_v = _largest(hist, 512, cnt - 1 - cnt // 2, top)  # sorted: (cnt - 1) // 2-th, next
         lo_v = lo_v if cnt % 2 == 0 else hi_v
         noise = MAD_TO_SIGMA * (((lo_v - white) + (hi_v - white)) / 2) / ABOVE_WHITE_SPREAD
     noise = max(noise, QUANTISATION_NOISE)
