@@ -58,6 +58,7 @@ import numba
 import numpy as np
 
 from triaxtrack.nearest import overlapping_discs
+from triaxtrack.window_lanes import SLACK
 from triaxtrack.window_levels import QUANTISATION_NOISE, copy_window, levels
 from triaxtrack.window_rows import (
     GROW_PX,
@@ -306,20 +307,21 @@ def _cell(m: np.ndarray, wins: np.ndarray, at: int, xy: np.ndarray, cx: float, c
 @numba.njit(cache=True, inline="always")
 def _measure_one(wins: np.ndarray, at: int, xy: np.ndarray, off: np.ndarray, cx: float, cy: float, rad: float,
                  white: float, noise: float, s_white: float, ink_fraction: float, disc_margin: float,
-                 m: np.ndarray, rows: np.ndarray, nb: np.ndarray, ox: float, oy: float) -> tuple:  # fmt: skip
+                 m: np.ndarray, rows: np.ndarray, squares: np.ndarray, nb: np.ndarray, ox: float,
+                 oy: float) -> tuple:  # fmt: skip
     """One target's blob in its (padded) window at ``wins[at:]`` from the prediction (cx, cy)
     relative to the window centre (``ox``, ``oy``; module docstring), weighted and run on in its
     cell among the touching targets ``nb`` (:func:`_cell`; none: the whole window):
     ``(centroid u, v relative to the window centre, area, mass, sigma_mass, sigma_px, reason
     code)``. A window of at most ``MAX_COLUMNS`` columns is measured on its rows packed into
-    words (:func:`triaxtrack.window_rows.measure_rows`, scratch ``rows``), a wider one on the
-    byte masks ``m`` (the same results)."""
+    words (:func:`triaxtrack.window_rows.measure_rows`, scratch ``rows`` and ``squares``), a wider
+    one on the byte masks ``m`` (the same results)."""
     level = max(INK_NOISE_K * noise, ink_fraction * white)
     darkest, sure = _last_darker(white, level), _last_darker(white, level + INK_NOISE_K * noise)
     n, core = int(round(math.sqrt(xy.shape[1]))) - 2, (rad - disc_margin) ** 2
     if n <= MAX_COLUMNS:
         runs_on, trunc, area, s, cu, cv, npx, du, du2, dv, dv2 = measure_rows(
-            wins, at, n, darkest, sure, cx, cy, rad, core, white, noise, nb, ox, oy, rows
+            wins, at, n, darkest, sure, cx, cy, rad, core, white, noise, nb, ox, oy, rows, squares
         )
     else:
         ink = m[_INK]
@@ -378,7 +380,8 @@ def _measure_all(g: np.ndarray, uv: np.ndarray, rad: np.ndarray, ink_fraction: f
     sizes = 2 * half[sel] + 1
     start = np.zeros(m + 1, np.int64)
     start[1:] = np.cumsum((sizes + 2) ** 2)
-    wins = np.empty(start[-1], np.uint8)  # each window's pixels, copied once (the frame is large)
+    # each window's pixels, copied once (the frame is large); a row is read as whole vector lanes
+    wins = np.empty(start[-1] + SLACK, np.uint8)
     hist = np.empty(768, np.int32)
     inner = np.empty(half.max() + 1 if n else 1, np.int64)
     white, noise, s_white = np.full(n, np.nan), np.full(n, np.nan), np.zeros(n)
@@ -397,6 +400,7 @@ def _measure_all(g: np.ndarray, uv: np.ndarray, rad: np.ndarray, ink_fraction: f
     noise[sel] = np.minimum(np.maximum(noise[sel], frame_noise), STRUCTURE_K * frame_noise)
     masks = np.zeros((_PLANES, (sizes.max() + 2) ** 2), np.uint8)
     words = np.zeros((PLANES, sizes.max() + 2), np.int64)
+    squares = np.empty(64)
     xy, off, real = _geometry(0)
     for k in np.argsort(sizes):  # by size: one geometry for each
         t = sel[k]
@@ -406,7 +410,7 @@ def _measure_all(g: np.ndarray, uv: np.ndarray, rad: np.ndarray, ink_fraction: f
         cx, cy = uv[t, 0] - centre[t, 0], uv[t, 1] - centre[t, 1]  # the prediction, window-relative
         cu, cv, area[t], mass[t], smass[t], sigma, code[t] = _measure_one(
             wins, _U(start[k]), xy, off, cx, cy, rad[t], white[t], noise[t], s_white[t], ink_fraction,
-            disc_margin, masks, words, nb[t], float(centre[t, 0]), float(centre[t, 1]))  # fmt: skip
+            disc_margin, masks, words, squares, nb[t], float(centre[t, 0]), float(centre[t, 1]))  # fmt: skip
         if code[t] == 0 or code[t] == _TRUNCATED:
             uv_out[t, 0], uv_out[t, 1], spx[t] = cu + centre[t, 0], cv + centre[t, 1], sigma
     return uv_out, area, mass, smass, spx, white, noise, code, frame_noise

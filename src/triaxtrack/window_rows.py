@@ -1,10 +1,10 @@
 """One target's blob in its window (:mod:`triaxtrack.window`) on masks packed one row a word
 (bit j: column j), for windows of at most 63 columns: the same masks, re-centring and sums as the
 byte masks of :mod:`triaxtrack.window` give. A row's disc is the word of its pixels' distance
-tests, a 3x3 dilation is three ORs of shifted words, and the loops over a row's pixels (the
-distance tests, the mean shift's and the weighted sums, these from the row's lowest bit taken to
-its highest) have no branches, so that they run on whole vectors. The sums are of integers, the
-same in any order: the same results. The planes of words are indexed in place (a view of one
+tests, a 3x3 dilation is three ORs of shifted words, and a row's ink, distance tests and sums
+over a word's pixels are each a few vector instructions on the whole row
+(:mod:`triaxtrack.window_lanes`). The sums are of integers, the same in any order: the same
+results. The planes of words are indexed in place (a view of one
 would count references, atomically, for every target). Also the valley between touching targets
 (:func:`valley`), which both kernels share. Compiled with numba."""
 
@@ -17,6 +17,8 @@ import numba
 import numpy as np
 from numba.core import types
 from numba.core.extending import intrinsic
+
+from triaxtrack.window_lanes import at_most, column_squares, column_sums, pixel_sums, within
 
 MEAN_SHIFT_STEPS = 3  # re-centring steps of the disc; motion left after prediction is sub-pixel
 INK_NOISE_K = 3.5  # ink: darker than the white level by at least this x the noise (one-sided
@@ -80,44 +82,22 @@ def valley(wins: np.ndarray, at: int, stride: int, cx: float, cy: float, nbk: np
     return True, cx + dx * at_top / steps, cy + dy * at_top / steps, dx, dy
 
 
-@numba.njit(cache=True, inline="always")
-def _within(n: int, h: int, c: float, d2y: float, reach2: float) -> np.int64:
-    """The word with bit j set for the columns j (0 .. n - 1) of a row with ``(j - h - c)^2 + d2y
-    <= reach2`` (the test of every pixel, without branches: vectorised)."""
-    w = np.int64(0)
-    if not d2y <= reach2:
-        return w
-    for j in range(n):
-        dx = (j - h) - c
-        w |= np.int64(dx * dx + d2y <= reach2) << np.int64(j)
-    return w
-
-
-def _one_word(bit_op: str) -> Any:
-    """A compiled function of one int64 word, LLVM's instruction ``bit_op`` on it: 'ctpop' (the
-    bits set), 'cttz' (the index of the lowest bit set; 64: none) or 'ctlz' (63 less it: the index
-    of the highest bit set; -1: none)."""
+def _ctpop() -> Any:
+    """A compiled function of one int64 word: the number of bits set in it (LLVM's ctpop)."""
 
     def typer(typingctx: Any, w: Any) -> Any:
         if w != types.int64:
             return None
 
         def codegen(context: Any, builder: Any, sig: Any, args: Any) -> Any:
-            if bit_op == "ctpop":
-                return builder.ctpop(args[0])
-            no_poison = context.get_constant(types.boolean, False)  # (0 in: 64, not undefined)
-            if bit_op == "cttz":
-                return builder.cttz(args[0], no_poison)
-            return builder.sub(context.get_constant(types.int64, 63), builder.ctlz(args[0], no_poison))
+            return builder.ctpop(args[0])
 
         return types.int64(types.int64), codegen
 
     return intrinsic(typer)
 
 
-_popcount = _one_word("ctpop")  # the number of bits set in a word
-_lowest_bit = _one_word("cttz")  # the index of a word's lowest bit set (64: none)
-_highest_bit = _one_word("ctlz")  # the index of a word's highest bit set (-1: none)
+_popcount = _ctpop()  # the number of bits set in a word
 
 
 @numba.njit(cache=True, inline="always")
@@ -161,35 +141,33 @@ def blob_moments(
 
 
 @numba.njit(cache=True, inline="always")
-def _row_sums(wins: np.ndarray, row: int, h: int, t: np.int64) -> tuple[int, int, int]:
-    """Over the pixels of bits ``t`` of the window row at ``wins[row:]``: the sums of their levels
-    v, offsets x (from column ``h``) and v x (the run between the lowest and the highest bit,
-    without branches: vectorised)."""
-    rv = rx = rvx = 0
-    for j in range(_lowest_bit(t), _highest_bit(t) + 1):
-        use = (t >> np.int64(j)) & _ONE
-        v, x = np.int64(wins[row + _U(j)]) * use, np.int64(j - h)
-        rv, rx, rvx = rv + v, rx + use * x, rvx + v * x
-    return rv, rx, rvx
+def _row_sums(wins: np.ndarray, row: int, n: int, h: int, t: np.int64) -> tuple[int, int, int]:
+    """Over the pixels of bits ``t`` of the ``n``-column window row at ``wins[row:]``: the sums of
+    their levels v, offsets x (from column ``h``) and v x (x = j - h)."""
+    sv, svj = pixel_sums(wins, row, n, t)
+    sj, _ = column_sums(n, t)
+    return sv, sj - h * _popcount(t), svj - h * sv
 
 
 @numba.njit(cache=True, inline="always")
 def _mean_shift(wins: np.ndarray, at: int, n: int, words: np.ndarray, white: float, cx: float, cy: float,
-                core: float) -> tuple[float, float]:  # fmt: skip
+                core: float, squares: np.ndarray) -> tuple[float, float]:  # fmt: skip
     """The contrast-weighted centre of the ink (plane ``_INK`` of ``words``) within ``core``
     (squared distance) of (cx, cy), re-centred ``MEAN_SHIFT_STEPS`` times (window-relative; it
     stays put where there is none; a step that does not move it ends the re-centring). The
     pixels a step takes (in plane ``_SPARE``): a step that takes those of the step before has
     their sums, so their centre, and ends the re-centring without summing them again. Sums of
-    integers (exact, in any order): sum(w x) = W sum(x) - sum(v x)."""
+    integers (exact, in any order): sum(w x) = W sum(x) - sum(v x). ``squares``: scratch
+    (:func:`~triaxtrack.window_lanes.column_squares`)."""
     h, stride = n // 2, n + 2
     if not (np.isfinite(cx) and np.isfinite(cy)):
         return cx, cy  # no pixel is taken: it stays put
     for step in range(MEAN_SHIFT_STEPS):
         same = step > 0
+        column_squares(n, h, cx, squares)
         for i in range(1, n + 1):
             dy = (i - 1 - h) - cy
-            t = words[_INK, i] & _within(n, h, cx, dy * dy, core)
+            t = words[_INK, i] & within(n, squares, dy * dy, core)
             same &= t == words[_SPARE, i]
             words[_SPARE, i] = t
         if same:  # the pixels of the step before: its centre again
@@ -198,7 +176,7 @@ def _mean_shift(wins: np.ndarray, at: int, n: int, words: np.ndarray, white: flo
         for i in range(1, n + 1):
             t = words[_SPARE, i]
             if t:
-                rv, rx, rvx = _row_sums(wins, at + _U(i * stride + 1), h, t)
+                rv, rx, rvx = _row_sums(wins, at + _U(i * stride + 1), n, h, t)
                 rc, y = _popcount(t), np.int64(i - 1 - h)
                 cnt, sv, sx, svx, sy, svy = cnt + rc, sv + rv, sx + rx, svx + rvx, sy + rc * y, svy + rv * y
         ux, uy = shifted_centre(cnt, white, sv, sx, svx, sy, svy)
@@ -232,24 +210,23 @@ def _grow(words: np.ndarray, n: int) -> tuple[int, int]:
 @numba.njit(cache=True, inline="always")
 def measure_rows(wins: np.ndarray, at: int, n: int, darkest: int, sure_level: int, cx: float, cy: float,
                  rad: float, core: float, white: float, noise: float, nb: np.ndarray, ox: float, oy: float,
-                 words: np.ndarray) -> tuple:  # fmt: skip
+                 words: np.ndarray, squares: np.ndarray) -> tuple:  # fmt: skip
     """One target's blob in its ``n`` x ``n`` (padded) window at ``wins[at:]`` (n <= ``MAX_COLUMNS``)
     from the prediction (cx, cy) relative to its centre (``ox``, ``oy``), as
     :func:`triaxtrack.window._measure_one` finds it (ink: levels <= ``darkest``, beyond doubt <=
     ``sure_level``; the disc ``rad``, the mean shift's ``core``; ``words``: scratch, (``PLANES``,
-    >= n + 2) int64): ``(runs on, ink outside the disc, area, summed contrast, centroid u, v,
+    >= n + 2) int64, and ``squares``, float64 (64); ``wins`` readable ``SLACK`` bytes past its
+    rows: :mod:`triaxtrack.window_lanes`):
+    ``(runs on, ink outside the disc, area, summed contrast, centroid u, v,
     weighted pixels, sum(x - u), sum((x - u)^2), sum(y - v), sum((y - v)^2))`` (window-relative)."""
     h, stride = n // 2, n + 2
     for p in range(PLANES):  # the padding rows (rows 1 .. n are all written before they are read)
         words[p, 0] = words[p, n + 1] = 0
     full = (_ONE << np.int64(n)) - _ONE
     for i in range(1, n + 1):
-        row, a, b = at + _U(i * stride + 1), np.int64(0), np.int64(0)
-        for j in range(n):
-            v = wins[row + _U(j)]
-            a |= np.int64(v <= darkest) << np.int64(j)
-            b |= np.int64(v <= sure_level) << np.int64(j)
-        words[_INK, i], words[_SURE, i], words[_CELL, i] = a, b, full
+        row = at + _U(i * stride + 1)
+        words[_INK, i], words[_SURE, i] = at_most(wins, row, n, darkest), at_most(wins, row, n, sure_level)
+        words[_CELL, i] = full
     for k in range(nb.shape[0]):  # the target's side of the valley to each touching target
         divides, vx, vy, dx, dy = valley(wins, at, stride, cx, cy, nb[k], ox, oy, noise)
         if divides:
@@ -258,12 +235,13 @@ def measure_rows(wins: np.ndarray, at: int, n: int, darkest: int, sure_level: in
                 for j in range(n):
                     if ((j - h) - vx) * dx + y * dy > 0:
                         words[_CELL, i + 1] &= ~(_ONE << np.int64(j))
-    cx, cy = _mean_shift(wins, at, n, words, white, cx, cy, core)
+    cx, cy = _mean_shift(wins, at, n, words, white, cx, cy, core, squares)
     r2 = rad * rad
+    column_squares(n, h, cx, squares)
     for i in range(1, n + 1):  # the disc, and the seeds: the ink within sqrt(2) of the centre
         dy = (i - 1 - h) - cy
-        words[_DISC, i] = _within(n, h, cx, dy * dy, r2)
-        words[_SPARE, i] = words[_INK, i] & _within(n, h, cx, dy * dy, 2.0)
+        words[_DISC, i] = within(n, squares, dy * dy, r2)
+        words[_SPARE, i] = words[_INK, i] & within(n, squares, dy * dy, 2.0)
     first, last = _grow(words, n)
     _dilate(words, _BLOB, _NEAR, n)
     for i in range(n + 2):
@@ -287,13 +265,11 @@ def measure_rows(wins: np.ndarray, at: int, n: int, darkest: int, sure_level: in
         if w == 0:
             continue
         row, y = at + _U(i * stride + 1), np.int64(i - 1 - h)
-        rx = rx2 = rc = rv = rpx = rvx = 0
-        for j in range(_lowest_bit(w), _highest_bit(w) + 1):  # the row's run, without branches (vectorised)
-            v, x, use = np.int64(wins[row + _U(j)]), np.int64(j - h), (w >> np.int64(j)) & _ONE
-            pos = use * np.int64(v <= below)
-            rx, rx2 = rx + use * x, rx2 + use * x * x
-            rc, rv, rpx, rvx = rc + pos, rv + pos * v, rpx + pos * x, rvx + pos * v * x
-        rn = _popcount(w)
+        rn, (sj, sj2) = _popcount(w), column_sums(n, w)  # the weighted pixels' x = j - h, and x^2
+        rx, rx2 = sj - h * rn, sj2 - 2 * h * sj + h * h * rn
+        pos = w & at_most(wins, row, n, below)  # those with a positive contrast: their v, x, v x
+        rc, (rv, svj), (pj, _) = _popcount(pos), pixel_sums(wins, row, n, pos), column_sums(n, pos)
+        rpx, rvx = pj - h * rc, svj - h * rv
         npx, ax, ax2, ay, ay2 = npx + rn, ax + rx, ax2 + rx2, ay + rn * y, ay2 + rn * y * y
         cnt, sv, sx, svx, sy, svy = cnt + rc, sv + rv, sx + rpx, svx + rvx, sy + rc * y, svy + rv * y
     s, cu, cv, du, du2, dv, dv2 = blob_moments(cnt, white, sv, sx, svx, sy, svy, npx, ax, ax2, ay, ay2)

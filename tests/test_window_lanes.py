@@ -1,0 +1,58 @@
+"""The window rows' vector kernels (triaxtrack.window_lanes) against the same tests and sums a
+pixel at a time: every bit and sum equal, on rows of 1 to 63 columns (16, 32 and 64 lanes)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from triaxtrack.window_lanes import SLACK, at_most, column_squares, column_sums, pixel_sums, within
+
+WIDTHS = [1, 2, 11, 15, 16, 17, 21, 31, 32, 33, 47, 63]
+
+
+def _word(bits: np.ndarray) -> int:
+    return int(sum(1 << j for j in np.flatnonzero(bits)))
+
+
+@pytest.mark.parametrize("n", WIDTHS)
+def test_at_most_is_the_word_of_each_pixels_compare(n):
+    rng = np.random.default_rng(n)
+    wins = rng.integers(0, 256, 300 + SLACK, dtype=np.uint8)
+    wins[:20] = [0, 255] * 10  # the extremes, in the first rows read
+    for row in (0, 7, 300 - n):
+        pixels = wins[row : row + n].astype(int)
+        for level in (-300, -1, 0, 1, 100, 127, 128, 200, 254, 255, 256, 1000):
+            assert at_most(wins, np.uint64(row), n, level) == _word(pixels <= level), (row, level)
+
+
+@pytest.mark.parametrize("n", WIDTHS)
+def test_within_is_the_word_of_each_pixels_distance_test(n):
+    rng = np.random.default_rng(100 + n)
+    h = n // 2
+    squares = np.full(64, -1.0)
+    centres = [0.0, 0.5, -0.5, 1e-17, 0.25 - 1e-16, np.nan, 3 * n, *rng.uniform(-h - 2, h + 2, 20)]
+    for c in centres:
+        column_squares(n, h, float(c), squares)
+        for _ in range(30):
+            dy, reach2 = rng.uniform(-h - 1, h + 1), rng.choice([2.0, rng.uniform(0, (h + 1) ** 2)])
+            if rng.random() < 0.2:  # a reach on a pixel's squared distance exactly
+                j = int(rng.integers(n))
+                reach2 = ((j - h) - c) ** 2 + dy * dy
+            # the kernels' test a pixel at a time (Python's floats are the same doubles)
+            expect = [((j - h) - c) * ((j - h) - c) + dy * dy <= reach2 for j in range(n)]
+            assert within(n, squares, dy * dy, float(reach2)) == _word(np.array(expect)), (c, dy, reach2)
+
+
+@pytest.mark.parametrize("n", WIDTHS)
+def test_pixel_and_column_sums_over_a_words_pixels(n):
+    rng = np.random.default_rng(200 + n)
+    wins = rng.integers(0, 256, 300 + SLACK, dtype=np.uint8)
+    wins[:64] = 255  # the largest sums
+    for row in (0, 5, 300 - n):
+        pixels = wins[row : row + n].astype(np.int64)
+        for take in (np.ones(n, bool), np.zeros(n, bool), rng.random(n) < 0.5):
+            word = np.int64(_word(take))
+            j = np.flatnonzero(take)
+            assert pixel_sums(wins, np.uint64(row), n, word) == (pixels[j].sum(), (pixels[j] * j).sum())
+            assert column_sums(n, word) == (j.sum(), (j * j).sum())
