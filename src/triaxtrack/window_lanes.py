@@ -206,6 +206,27 @@ def column_squares(n: int, h: int, c: float, squares: np.ndarray) -> None:
         squares[j] = np.inf
 
 
+def _by_lanes(on16: Any, on32: Any, on64: Any) -> Any:
+    """A compiled ``(n, a, b, c)`` calling, with ``(a, b, c)``, the one of three intrinsics of 16,
+    32 and 64 lanes with the fewest lanes that hold a row of ``n`` columns (numba calls a function
+    it knows when compiling, not one picked from a tuple)."""
+
+    @numba.njit(cache=True, inline="always")
+    def call(n: int, a: Any, b: Any, c: Any) -> Any:
+        lanes = _lanes_of(n)
+        if lanes == 16:
+            return on16(a, b, c)
+        if lanes == 32:
+            return on32(a, b, c)
+        return on64(a, b, c)
+
+    return call
+
+
+_within_by_lanes = _by_lanes(_within_16, _within_32, _within_64)
+_pixel_sums_by_lanes = _by_lanes(_pixel_sums_16, _pixel_sums_32, _pixel_sums_64)
+
+
 @numba.njit(cache=True, inline="always")
 def within(n: int, squares: np.ndarray, d2y: float, reach2: float) -> np.int64:
     """The word with bit j set for the columns j of a row whose squared distance from the centre
@@ -213,24 +234,14 @@ def within(n: int, squares: np.ndarray, d2y: float, reach2: float) -> np.int64:
     test ``dx * dx + d2y <= reach2`` of every pixel at once."""
     if not d2y <= reach2:  # (no pixel of the row is: its words need no vector)
         return np.int64(0)
-    lanes = _lanes_of(n)
-    if lanes == 16:
-        return _within_16(squares, d2y, reach2)
-    if lanes == 32:
-        return _within_32(squares, d2y, reach2)
-    return _within_64(squares, d2y, reach2)
+    return _within_by_lanes(n, squares, d2y, reach2)
 
 
 @numba.njit(cache=True, inline="always")
 def pixel_sums(wins: np.ndarray, row: int, n: int, word: np.int64) -> tuple[int, int]:
     """Over the pixels of bits ``word`` of the row at ``wins[row:]`` (``n`` columns): the sums of
     their levels v and of v j."""
-    lanes = _lanes_of(n)
-    if lanes == 16:
-        return _pixel_sums_16(wins, row, word)
-    if lanes == 32:
-        return _pixel_sums_32(wins, row, word)
-    return _pixel_sums_64(wins, row, word)
+    return _pixel_sums_by_lanes(n, wins, row, word)
 
 
 @numba.njit(cache=True, inline="always")
