@@ -230,6 +230,11 @@ class CellTargetsDesign:
             items[key] = _stripes(cls, items[key], f"{section}.{key}")
         return CellTargetsDesign(**items)
 
+    def longitudinal_spacing(self, stripe: LongitudinalStripe) -> float:
+        """The distance (mm) between consecutive dots of a longitudinal ``stripe``: its dots evenly
+        from ``longitudinal_z_top`` down to ``longitudinal_z_bottom``."""
+        return (self.longitudinal_z_top - self.longitudinal_z_bottom) / (stripe.count - 1)
+
 
 @dataclass(frozen=True)
 class MembraneDesign:

@@ -83,7 +83,7 @@ def _label_longitudinal(f: _Frame, pool: _Pool, centres: dict, design: KitDesign
     top, bottom = cell.ct_stripes[0], cell.ct_stripes[-1]
     for ls in cell.longitudinal_stripes:
         n = ls.count
-        spacing_mm = (zt - zb) / (n - 1)
+        spacing_mm = cell.longitudinal_spacing(ls)
         anchors, hints = {}, {}
         ct_top = ls.ct
         ct_bottom = ct_top - top.first_id + bottom.first_id
@@ -215,8 +215,7 @@ def _straight_chains(
 def _stripe_over_row_pitch(design: KitDesign) -> float:
     """A longitudinal stripe's dot spacing over the membrane's row spacing (design, mm)."""
     cell, m, spec = design.cell_targets, design.membrane, design.specimen
-    stripe = (cell.longitudinal_z_top - cell.longitudinal_z_bottom) / (cell.longitudinal_stripes[0].count - 1)
-    return stripe / (spec.height / m.rows)
+    return cell.longitudinal_spacing(cell.longitudinal_stripes[0]) / (spec.height / m.rows)
 
 
 def _near_polyline(

@@ -247,8 +247,8 @@ def label_uncoded_stripes(
         if j is None or j in done or (f.ids[core] != UNLABELLED).any():  # labelled (from its CT, a chain)
             continue
         ls = stripes[j]
-        spacing = (cell.longitudinal_z_top - cell.longitudinal_z_bottom) / (ls.count - 1)  # mm
-        end_at = (cell.band_margin + cell.longitudinal_dot_diameter / 2) / spacing  # steps past an end dot
+        # steps past an end dot's centre
+        end_at = (cell.band_margin + cell.longitudinal_dot_diameter / 2) / cell.longitudinal_spacing(ls)
         core = core[np.argsort(f.pos[core] @ axis)]  # top first: the stripe's IDs increase downwards
         along = f.pos[core[-1]] - f.pos[core[0]]
         kept = _steps(f.pos[core] @ (along / np.linalg.norm(along)))
