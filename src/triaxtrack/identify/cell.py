@@ -162,6 +162,7 @@ MIN_CHAIN_DOTS = 8  # a straight line of at least this many dots on another surf
 CHAIN_LINE_PX = 1.0  # ... within this of a straight line (undistorted pixels: a generatrix of the
 # cell images straight)
 CHAIN_PITCH_MIN = 0.9  # a stripe's gaps are at least this x its design spacing in membrane rows
+CHAIN_PITCH_MAX = 1.5  # ... and at the median under this: most of a stripe's dots are consecutive
 CHAIN_AXIS_DEG = 15.0  # a stripe runs along the specimen's axis (tilted cameras, distortion)
 PITCH_NEIGHBOURS = 8  # a grid dot's row neighbour is among its 8 nearest
 PITCH_AXIS_DEG = 30.0  # ... in the axis's direction within this (a nearer row neighbour comes first)
@@ -189,8 +190,10 @@ def _straight_chains(
     a straight line of at least ``MIN_CHAIN_DOTS`` of them (RANSAC) along the specimen's axis
     (``axis``: its image direction, within ``CHAIN_AXIS_DEG``), its dots spaced as a stripe's
     are against the membrane's rows (``pitch``: the membrane's row pitch nearby, pixels; a stripe
-    is spaced (z_top - z_bottom) / (count - 1), the rows height / rows: 3.15 against 2.37 mm),
-    its blobs in order along it."""
+    is spaced (z_top - z_bottom) / (count - 1), the rows height / rows: 3.15 against 2.37 mm)
+    and most of them consecutive (the median gap under ``CHAIN_PITCH_MAX`` spacings: a membrane
+    column's grazing dots, found every few rows at a silhouette, line up too), its blobs in
+    order along it."""
     from skimage.measure import LineModelND, ransac
 
     left = np.asarray(cand, np.int64)
@@ -206,8 +209,9 @@ def _straight_chains(
             continue  # a row of a ring's dots, not a stripe
         along = (pos[members] - model.origin) @ model.direction
         order = np.argsort(along)
-        if not np.median(np.diff(along[order])) >= CHAIN_PITCH_MIN * _stripe_over_row_pitch(design) * pitch:
-            continue  # a column of membrane dots (beside a bright edge), not a stripe
+        gap = np.median(np.diff(along[order])) / (_stripe_over_row_pitch(design) * pitch)
+        if not CHAIN_PITCH_MIN <= gap < CHAIN_PITCH_MAX:
+            continue  # a column of membrane dots (beside a bright edge, or every few rows), not a stripe
         out.append(members[order])
     return out
 
@@ -234,10 +238,13 @@ SURFACE_NEIGHBOURS = 8  # free dots around a dot whose white level is the surfac
 
 
 def _on_another_surface(pool: _Pool) -> np.ndarray:
-    """Which free dots lie on a surface whose white level differs by more than
-    ``WHITE_TOLERANCE`` from the median of their ``SURFACE_NEIGHBOURS`` nearest free dots' (a
-    stripe's white band in front of the grey membrane, a strap across it); the white level
-    follows uneven light smoothly, a printed surface's edge does not."""
+    """Which free dots lie on a brighter surface, its white level more than ``WHITE_TOLERANCE``
+    above the median of their ``SURFACE_NEIGHBOURS`` nearest free dots' (a stripe's white band
+    in front of the grey membrane); the white level follows uneven light smoothly, a printed
+    surface's edge does not. A darker one is not a band: the membrane's grazing columns at its
+    silhouette, their white level taken in with the dark beyond, line up along the axis as a
+    stripe's dots do (every 2-4 rows: a straight chain of 7-16 of them on most cameras of a
+    300 mm ring), and a band laid along them hid the column and its neighbours."""
     free = np.nonzero(pool.free)[0]
     out = np.zeros(len(pool.free), bool)
     if len(free) <= SURFACE_NEIGHBOURS:
@@ -246,7 +253,7 @@ def _on_another_surface(pool: _Pool) -> np.ndarray:
     _, nb = tree.query(pool.pos[free], k=SURFACE_NEIGHBOURS + 1)
     white = pool.white[free]
     ratio = white / np.median(white[nb[:, 1:]], axis=1)
-    out[free] = np.abs(ratio - 1) > WHITE_TOLERANCE
+    out[free] = ratio - 1 > WHITE_TOLERANCE
     return out
 
 
