@@ -386,3 +386,15 @@ def test_exposure_scales_the_picture_before_the_noise(small_test):
     _, dim, _ = _render(small_test, "cam03", noise_sigma=0.0, vignetting=0.0, exposure=0.3)
     bright = lit > 100
     assert np.abs(dim[bright] - 0.3 * lit[bright]).max() <= 1.0  # rounding to grey levels only
+
+
+def test_a_render_that_moves_the_membrane_over_half_a_row_a_frame_is_told(design):
+    """Mid-height moves k H0 / 4 over the test with ``axial_nonuniformity`` k on top of the
+    strain: at k = 0.3 and 2 % strain over 8 frames, 12 mm, about 0.74 of a 2.37 mm dot row a
+    frame (the tracker read such a grid one row over); over 100 frames at 1 %, 0.05."""
+    from triaxtrack.simulate.scene import FOLLOWABLE_ROWS, largest_step_rows
+
+    fast = largest_step_rows(SimulationConfig.from_dict({"frames": 8, "axial_strain": 0.02}), design)
+    slow = largest_step_rows(SimulationConfig.from_dict({"frames": 100, "axial_strain": 0.01}), design)
+    assert fast == pytest.approx(0.74, abs=0.02) and fast > FOLLOWABLE_ROWS
+    assert slow == pytest.approx(0.049, abs=0.005)

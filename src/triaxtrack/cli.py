@@ -66,6 +66,7 @@ def _simulate(args: argparse.Namespace) -> int:
     from triaxtrack.kit import export_kit, load_design
     from triaxtrack.layout import TEST_FOLDER
     from triaxtrack.simulate import SimulationConfig, simulate_test
+    from triaxtrack.simulate.scene import FOLLOWABLE_ROWS, largest_step_rows
 
     opts = {
         f.name: getattr(args, f.name)
@@ -83,6 +84,12 @@ def _simulate(args: argparse.Namespace) -> int:
     dt = time.perf_counter() - t0
     print(f"simulated {cfg.cameras} cameras x {cfg.frames} frames ({cfg.width}x{cfg.height}) in {dt:.1f} s "
           f"({dt / (cfg.cameras * cfg.frames):.3f} s per camera-frame) -> {out}")  # fmt: skip
+    step = largest_step_rows(cfg, load_design(args.design))
+    if step > FOLLOWABLE_ROWS:
+        warning = (f"warning: membrane dots move up to {step:.2f} of a dot row between frames (over "
+                   f"{FOLLOWABLE_ROWS}): from a chunk's first frame the tracker reads such a grid one "
+                   "row over; render more frames, or less axial_strain or axial_nonuniformity")  # fmt: skip
+        print(warning, file=sys.stderr)
     return 0
 
 

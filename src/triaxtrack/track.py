@@ -11,8 +11,12 @@ from there each ID is carried forward without detecting or identifying the frame
    neighbours' motion), where it differs from the prediction by more than a quarter of a gate
    every target is measured again. So motion of up to about half the dot spacing is followed
    from a standing start (a chunk's first frames, a step of several frames), and a region that
-   moves farther is dropped, never locked one dot over. A first velocity is the first motion
-   measured, not averaged with an unknown zero.
+   moves farther is dropped; but a region that moves by more than one spacing less a gate
+   (0.7 of it) finds the next dot within its gate, as a grid moving back by the rest would, and
+   is locked one dot over (a 4K render moving mid-height 0.72 rows a frame: 600 dots per
+   camera; ``triaxtrack.simulate.largest_step_rows``; a real test moves a few thousandths of a
+   row a frame). A first velocity is the first motion measured, not averaged with an unknown
+   zero.
 2. **Measure** it locally (:mod:`triaxtrack.window`): in a small window around the prediction
    the window's own white level (a trimmed mean of its brighter pixels) and pixel noise (held
    to the frame's) are measured; ink is darker than the white level by ``ink_fraction`` of it
