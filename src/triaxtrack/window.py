@@ -52,7 +52,7 @@ sum(grey x)``).
 from __future__ import annotations
 
 import math
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numba
 import numpy as np
@@ -121,6 +121,10 @@ TRUNCATED_GROW_PX = 1.0  # once (the blur's reach: a blob larger still is no one
 _TRUNCATED = len(REASON_CODES)  # the kernel's code for such a blob (clean, measured as far as the disc)
 _U = np.uint64  # unsigned indices: numba leaves out the wrap-around of negative indices, which
 # would keep the loops from running on whole vectors
+# The per-window loops are compiled without the runtime's reference counts (numba's option _nrt,
+# not in its type stubs): they make no array, and every array they are given or view would
+# otherwise be counted up and down, atomically, for every window (a tenth of the kernel's time)
+_UNCOUNTED: dict[str, Any] = {"cache": True, "_nrt": False}
 
 
 @numba.njit(cache=True)
@@ -212,9 +216,12 @@ def _grow(m: np.ndarray, stride: int) -> tuple[int, int]:
     _dilate(m[_SEED], m[_BLOB], m[_ROOM], stride, 1, n)  # the seeds themselves need not be in the room
     while True:
         _dilate(m[_BLOB], m[_SEED], m[_ROOM], stride, 1, n)
-        if (m[_SEED, :size] == m[_BLOB, :size]).all():
+        same = True
+        for p in range(size):  # (no temporary arrays: compiled without the runtime's reference counts)
+            same &= m[_SEED, p] == m[_BLOB, p]
+            m[_BLOB, p] = m[_SEED, p]
+        if same:
             return 1, n
-        m[_BLOB, :size] = m[_SEED, :size]
 
 
 @numba.njit(cache=True)
@@ -304,18 +311,19 @@ def _cell(m: np.ndarray, wins: np.ndarray, at: int, xy: np.ndarray, cx: float, c
                     cell[p] = 0
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(**_UNCOUNTED)
 def _measure_one(wins: np.ndarray, at: int, xy: np.ndarray, off: np.ndarray, cx: float, cy: float, rad: float,
                  white: float, noise: float, s_white: float, ink_fraction: float, disc_margin: float,
-                 m: np.ndarray, rows: np.ndarray, squares: np.ndarray, nb: np.ndarray, ox: float,
+                 m: np.ndarray, rows: np.ndarray, squares: np.ndarray, nball: np.ndarray, t: int, ox: float,
                  oy: float) -> tuple:  # fmt: skip
     """One target's blob in its (padded) window at ``wins[at:]`` from the prediction (cx, cy)
     relative to the window centre (``ox``, ``oy``; module docstring), weighted and run on in its
-    cell among the touching targets ``nb`` (:func:`_cell`; none: the whole window):
+    cell among its touching targets ``nball[t]`` (:func:`_cell`; none: the whole window):
     ``(centroid u, v relative to the window centre, area, mass, sigma_mass, sigma_px, reason
     code)``. A window of at most ``MAX_COLUMNS`` columns is measured on its rows packed into
     words (:func:`triaxtrack.window_rows.measure_rows`, scratch ``rows`` and ``squares``), a wider
     one on the byte masks ``m`` (the same results)."""
+    nb = nball[t]
     level = max(INK_NOISE_K * noise, ink_fraction * white)
     darkest, sure = _last_darker(white, level), _last_darker(white, level + INK_NOISE_K * noise)
     n, core = int(round(math.sqrt(xy.shape[1]))) - 2, (rad - disc_margin) ** 2
@@ -366,6 +374,20 @@ def _windows(shape: tuple, uv: np.ndarray, rad: np.ndarray) -> tuple[np.ndarray,
     return half, centre, code
 
 
+@numba.njit(**_UNCOUNTED)
+def _copy_windows(g: np.ndarray, sel: np.ndarray, centre: np.ndarray, half: np.ndarray, sizes: np.ndarray,
+                  start: np.ndarray, rad: np.ndarray, hist: np.ndarray, wins: np.ndarray, inner: np.ndarray,
+                  white: np.ndarray, noise: np.ndarray, s_white: np.ndarray) -> None:  # fmt: skip
+    """Each window ``sel[k]`` copied into ``wins`` from ``start[k]`` and its levels (white, noise
+    and the white level's uncertainty) measured (compiled without the runtime's reference counts:
+    no array is made or kept, and none is counted again for every window)."""
+    for k in range(len(sel)):
+        t = sel[k]
+        y0, x0, ring_r2 = centre[t, 1] - half[t], centre[t, 0] - half[t], (rad[t] + ANNULUS_GAP_PX) ** 2
+        top = copy_window(g, y0, x0, sizes[k], ring_r2, hist, wins, _U(start[k]), inner)
+        white[t], noise[t], s_white[t] = levels(hist, sizes[k], top)
+
+
 @numba.njit(cache=True)
 def _measure_all(g: np.ndarray, uv: np.ndarray, rad: np.ndarray, ink_fraction: float, disc_margin: float,
                  nb: np.ndarray, frame_noise: float) -> tuple:  # fmt: skip
@@ -385,10 +407,7 @@ def _measure_all(g: np.ndarray, uv: np.ndarray, rad: np.ndarray, ink_fraction: f
     hist = np.empty(768, np.int32)
     inner = np.empty(half.max() + 1 if n else 1, np.int64)
     white, noise, s_white = np.full(n, np.nan), np.full(n, np.nan), np.zeros(n)
-    for k, t in enumerate(sel):
-        y0, x0, ring_r2 = centre[t, 1] - half[t], centre[t, 0] - half[t], (rad[t] + ANNULUS_GAP_PX) ** 2
-        top = copy_window(g, y0, x0, sizes[k], ring_r2, hist, wins, _U(start[k]), inner)
-        white[t], noise[t], s_white[t] = levels(hist, sizes[k], top)
+    _copy_windows(g, sel, centre, half, sizes, start, rad, hist, wins, inner, white, noise, s_white)
     out = np.full((n, 2), np.nan), np.zeros(n), np.zeros(n), np.zeros(n), np.full(n, np.nan)
     if m == 0:
         return out + (white, noise, code, frame_noise)
@@ -410,7 +429,7 @@ def _measure_all(g: np.ndarray, uv: np.ndarray, rad: np.ndarray, ink_fraction: f
         cx, cy = uv[t, 0] - centre[t, 0], uv[t, 1] - centre[t, 1]  # the prediction, window-relative
         cu, cv, area[t], mass[t], smass[t], sigma, code[t] = _measure_one(
             wins, _U(start[k]), xy, off, cx, cy, rad[t], white[t], noise[t], s_white[t], ink_fraction,
-            disc_margin, masks, words, squares, nb[t], float(centre[t, 0]), float(centre[t, 1]))  # fmt: skip
+            disc_margin, masks, words, squares, nb, t, float(centre[t, 0]), float(centre[t, 1]))  # fmt: skip
         if code[t] == 0 or code[t] == _TRUNCATED:
             uv_out[t, 0], uv_out[t, 1], spx[t] = cu + centre[t, 0], cv + centre[t, 1], sigma
     return uv_out, area, mass, smass, spx, white, noise, code, frame_noise
