@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from triaxtrack.window_lanes import SLACK, at_most, column_squares, column_sums, pixel_sums, within
+from triaxtrack.window_lanes import SLACK, at_most, column_squares, column_sums, copy_row, pixel_sums, within
 
 WIDTHS = [1, 2, 11, 15, 16, 17, 21, 31, 32, 33, 47, 63]
 
@@ -56,3 +56,16 @@ def test_pixel_and_column_sums_over_a_words_pixels(n):
             j = np.flatnonzero(take)
             assert pixel_sums(wins, np.uint64(row), n, word) == (pixels[j].sum(), (pixels[j] * j).sum())
             assert column_sums(n, word) == (j.sum(), (j * j).sum())
+
+
+@pytest.mark.parametrize("n", WIDTHS)
+def test_copy_row_copies_a_frame_rows_pixels_and_finds_their_largest(n):
+    rng = np.random.default_rng(300 + n)
+    frame = rng.integers(0, 200, (9, 150), dtype=np.uint8)
+    frame[4, 70] = 255  # beyond the row copied from column 71 on: never its largest
+    frame[3, 60] = 254
+    for y, x in ((0, 0), (3, 60), (4, 71), (8, 150 - 64)):
+        wins = np.full(100 + SLACK, 7, np.uint8)
+        top = copy_row(frame, y * frame.strides[0] + x, wins, np.uint64(30), n)
+        assert top == frame[y, x : x + n].max(), (y, x)
+        assert (wins[30 : 30 + n] == frame[y, x : x + n]).all() and (wins[:30] == 7).all()

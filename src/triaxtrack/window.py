@@ -58,7 +58,7 @@ import numba
 import numpy as np
 
 from triaxtrack.nearest import overlapping_discs
-from triaxtrack.window_lanes import SLACK
+from triaxtrack.window_lanes import SLACK, prefetch
 from triaxtrack.window_levels import QUANTISATION_NOISE, copy_window, levels
 from triaxtrack.window_rows import (
     GROW_PX,
@@ -382,6 +382,12 @@ def _copy_windows(g: np.ndarray, sel: np.ndarray, centre: np.ndarray, half: np.n
     and the white level's uncertainty) measured (compiled without the runtime's reference counts:
     no array is made or kept, and none is counted again for every window)."""
     for k in range(len(sel)):
+        if k + 1 < len(sel):  # the next window's rows fetched while this one is counted (a 4K frame
+            u = sel[k + 1]  # is larger than the caches, and its windows are not in memory order)
+            ny, nx = centre[u, 1] - half[u], centre[u, 0] - half[u]
+            for i in range(sizes[k + 1]):
+                prefetch(g, (ny + i) * g.strides[0] + nx)
+                prefetch(g, (ny + i) * g.strides[0] + nx + sizes[k + 1] - 1)
         t = sel[k]
         y0, x0, ring_r2 = centre[t, 1] - half[t], centre[t, 0] - half[t], (rad[t] + ANNULUS_GAP_PX) ** 2
         top = copy_window(g, y0, x0, sizes[k], ring_r2, hist, wins, _U(start[k]), inner)
@@ -404,7 +410,7 @@ def _measure_all(g: np.ndarray, uv: np.ndarray, rad: np.ndarray, ink_fraction: f
     start[1:] = np.cumsum((sizes + 2) ** 2)
     # each window's pixels, copied once (the frame is large); a row is read as whole vector lanes
     wins = np.empty(start[-1] + SLACK, np.uint8)
-    hist = np.empty(768, np.int32)
+    hist = np.empty(1024, np.int32)
     inner = np.empty(half.max() + 1 if n else 1, np.int64)
     white, noise, s_white = np.full(n, np.nan), np.full(n, np.nan), np.zeros(n)
     _copy_windows(g, sel, centre, half, sizes, start, rad, hist, wins, inner, white, noise, s_white)

@@ -7,7 +7,10 @@ in its scalar remainder, and a compare's result is then one bit a lane in a word
 * :func:`within`: the word of a row's pixels within a reach of a centre, from the squared
   column offsets of the centre (:func:`column_squares`, once per centre) plus the row's;
 * :func:`pixel_sums`: over the pixels of a word, the sums of their levels ``v`` and of ``v j``;
-* :func:`column_sums`: over the columns of a word, the sums of ``j`` and ``j^2``
+* :func:`column_sums`: over the columns of a word, the sums of ``j`` and ``j^2``;
+* :func:`copy_row`: a frame row's pixels copied into a window as one vector, and their largest
+  (:mod:`triaxtrack.window_levels`), and :data:`prefetch`: a hint to fetch a frame's cache line
+  (the next window's rows, while this one is counted: the frame is larger than the caches)
 
 (``j``: the column, 0 at the row's first pixel; bit j of a word is column j). The sums are of
 integers and the distance test the same floating-point operations as a pixel at a time (the
@@ -163,16 +166,71 @@ def _column_sums(lanes: int) -> Any:
     return intrinsic(typer)
 
 
+def _copy_row(lanes: int) -> Any:
+    """An intrinsic ``(g, at, wins, row, word)``: the ``lanes`` bytes of the 2-d uint8 array ``g``
+    from byte ``at`` of its data stored at ``wins[row:]``, and the largest of them in the lanes of
+    ``word`` (0 in none)."""
+
+    def typer(typingctx: Any, g: Any, at: Any, wins: Any, row: Any, word: Any) -> Any:
+        if not (isinstance(g, types.Array) and g.dtype == types.uint8 and g.ndim == 2
+                and at in types.integer_domain and _bytes_ok(wins, row) and word == types.int64):  # fmt: skip
+            return None
+
+        def codegen(context: Any, builder: Any, sig: Any, args: Any) -> Any:
+            _, mask, _, _, _ = _lanes(builder, lanes)
+            vty = ir.VectorType(ir.IntType(8), lanes)
+            data = context.make_array(sig.args[0])(context, builder, args[0]).data
+            src = builder.load(builder.bitcast(builder.gep(data, [args[1]]), vty.as_pointer()), align=1)
+            dst = context.make_array(sig.args[2])(context, builder, args[2]).data
+            builder.store(src, builder.bitcast(builder.gep(dst, [args[3]]), vty.as_pointer()), align=1)
+            kept = builder.select(mask(args[4]), src, ir.Constant(vty, [0] * lanes))
+            fn = cgutils.get_or_insert_function(
+                builder.module, ir.FunctionType(ir.IntType(8), [vty]), f"llvm.vector.reduce.umax.v{lanes}i8"
+            )
+            return builder.zext(builder.call(fn, [kept]), ir.IntType(64))
+
+        return types.int64(g, at, wins, row, word), codegen
+
+    return intrinsic(typer)
+
+
+def _prefetch() -> Any:
+    """An intrinsic ``(g, at)``: a hint to fetch the cache line of byte ``at`` of the 2-d uint8
+    array ``g``'s data (LLVM's prefetch: no fault, no result)."""
+
+    def typer(typingctx: Any, g: Any, at: Any) -> Any:
+        if not (isinstance(g, types.Array) and g.dtype == types.uint8 and at in types.integer_domain):
+            return None
+
+        def codegen(context: Any, builder: Any, sig: Any, args: Any) -> Any:
+            data = context.make_array(sig.args[0])(context, builder, args[0]).data
+            i8p = ir.IntType(8).as_pointer()
+            fn = cgutils.get_or_insert_function(
+                builder.module, ir.FunctionType(ir.VoidType(), [i8p, _I32, _I32, _I32]), "llvm.prefetch.p0"
+            )
+            ptr = builder.bitcast(builder.gep(data, [args[1]]), i8p)
+            builder.call(fn, [ptr, ir.Constant(_I32, 0), ir.Constant(_I32, 3), ir.Constant(_I32, 1)])
+            return context.get_dummy_value()
+
+        return types.none(g, at), codegen
+
+    return intrinsic(typer)
+
+
+prefetch = _prefetch()  # a hint to fetch a frame's cache line
+
+
 # one intrinsic per number of lanes (numba calls a global function, not one from a tuple)
 _at_most_16, _at_most_32, _at_most_64 = _at_most(16), _at_most(32), _at_most(64)
 _within_16, _within_32, _within_64 = _within(16), _within(32), _within(64)
 _pixel_sums_16, _pixel_sums_32, _pixel_sums_64 = _pixel_sums(16), _pixel_sums(32), _pixel_sums(64)
 _column_sums_16, _column_sums_32, _column_sums_64 = _column_sums(16), _column_sums(32), _column_sums(64)
+_copy_row_16, _copy_row_32, _copy_row_64 = _copy_row(16), _copy_row(32), _copy_row(64)
 _ONE = np.int64(1)
 
 
 @numba.njit(cache=True, inline="always")
-def _lanes_of(n: int) -> int:
+def lanes_of(n: int) -> int:
     """The fewest lanes (16, 32, 64) that hold a row of ``n`` <= 63 columns."""
     return 16 if n <= 16 else (32 if n <= 32 else 64)
 
@@ -186,7 +244,7 @@ def at_most(wins: np.ndarray, row: int, n: int, level: int) -> np.int64:
         return np.int64(0)
     if level >= 255:
         return full
-    lanes, lv = _lanes_of(n), np.int64(level)
+    lanes, lv = lanes_of(n), np.int64(level)
     if lanes == 16:
         return _at_most_16(wins, row, lv) & full
     if lanes == 32:
@@ -202,7 +260,7 @@ def column_squares(n: int, h: int, c: float, squares: np.ndarray) -> None:
     for j in range(n):
         dx = (j - h) - c
         squares[j] = dx * dx
-    for j in range(n, _lanes_of(n)):
+    for j in range(n, lanes_of(n)):
         squares[j] = np.inf
 
 
@@ -213,7 +271,7 @@ def _by_lanes(on16: Any, on32: Any, on64: Any) -> Any:
 
     @numba.njit(cache=True, inline="always")
     def call(n: int, a: Any, b: Any, c: Any) -> Any:
-        lanes = _lanes_of(n)
+        lanes = lanes_of(n)
         if lanes == 16:
             return on16(a, b, c)
         if lanes == 32:
@@ -247,9 +305,23 @@ def pixel_sums(wins: np.ndarray, row: int, n: int, word: np.int64) -> tuple[int,
 @numba.njit(cache=True, inline="always")
 def column_sums(n: int, word: np.int64) -> tuple[int, int]:
     """Over the columns j of bits ``word`` (of a row of ``n``): the sums of j and of j^2."""
-    lanes = _lanes_of(n)
+    lanes = lanes_of(n)
     if lanes == 16:
         return _column_sums_16(word)
     if lanes == 32:
         return _column_sums_32(word)
     return _column_sums_64(word)
+
+
+@numba.njit(cache=True, inline="always")
+def copy_row(g: np.ndarray, at: int, wins: np.ndarray, row: int, n: int) -> int:
+    """Copy the ``n`` <= 63 pixels of a frame row (the 2-d uint8 array ``g``'s bytes from ``at`` of its
+    data; readable a whole vector of lanes on) to ``wins[row:]`` (and bytes past them, up to the
+    lanes: ``SLACK``), returning the largest of them."""
+    full = (_ONE << np.int64(n)) - _ONE
+    lanes = lanes_of(n)
+    if lanes == 16:
+        return _copy_row_16(g, at, wins, row, full)
+    if lanes == 32:
+        return _copy_row_32(g, at, wins, row, full)
+    return _copy_row_64(g, at, wins, row, full)
