@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from triaxtrack.window_lanes import SLACK, at_most, column_squares, column_sums, copy_row, pixel_sums, within
+from triaxtrack.window_lanes import SLACK, at_most, column_squares, copy_row, pos_sums, row_sums, within
 
 WIDTHS = [1, 2, 11, 15, 16, 17, 21, 31, 32, 33, 47, 63]
 
@@ -45,17 +45,35 @@ def test_within_is_the_word_of_each_pixels_distance_test(n):
 
 
 @pytest.mark.parametrize("n", WIDTHS)
-def test_pixel_and_column_sums_over_a_words_pixels(n):
+def test_row_sums_over_a_windows_rows_and_each_rows_words(n):
     rng = np.random.default_rng(200 + n)
-    wins = rng.integers(0, 256, 300 + SLACK, dtype=np.uint8)
-    wins[:64] = 255  # the largest sums
-    for row in (0, 5, 300 - n):
-        pixels = wins[row : row + n].astype(np.int64)
-        for take in (np.ones(n, bool), np.zeros(n, bool), rng.random(n) < 0.5):
-            word = np.int64(_word(take))
-            j = np.flatnonzero(take)
-            assert pixel_sums(wins, np.uint64(row), n, word) == (pixels[j].sum(), (pixels[j] * j).sum())
-            assert column_sums(n, word) == (j.sum(), (j * j).sum())
+    stride, h = n + 2, n // 2
+    wins = rng.integers(0, 256, 3 + stride * stride + SLACK, dtype=np.uint8)
+    wins[3 + stride : 3 + 3 * stride] = 255  # the largest sums
+    w = np.zeros(n + 2, np.int64)
+    pos = np.zeros(n + 2, np.int64)
+    for lo, hi in ((1, n), (2, n - 1), (n, n), (3, 2)):
+        for i in range(1, n + 1):
+            take = [np.ones(n, bool), np.zeros(n, bool), rng.random(n) < 0.5][i % 3]
+            w[i], pos[i] = _word(take), _word(take & (rng.random(n) < 0.7))
+        expect_w, expect_p = np.zeros(5, np.int64), np.zeros(6, np.int64)
+        for i in range(lo, hi + 1):
+            y, v = i - 1 - h, wins[3 + i * stride + 1 :][:n].astype(np.int64)
+            jw = [j for j in range(n) if w[i] >> j & 1]
+            jp = [j for j in range(n) if pos[i] >> j & 1]
+            expect_w += [len(jw), sum(jw), sum(j * j for j in jw), y * len(jw), y * y * len(jw)]
+            vp = v[jp]
+            expect_p += [
+                len(jp),
+                sum(jp),
+                y * len(jp),
+                vp.sum(),
+                (vp * np.array(jp, np.int64)).sum(),
+                y * vp.sum(),
+            ]
+        got = row_sums(wins, w, pos, np.uint64(3), n, lo, hi)
+        assert got == (*expect_w, *expect_p), (lo, hi)
+        assert pos_sums(wins, pos, np.uint64(3), n, lo, hi) == tuple(expect_p), (lo, hi)
 
 
 @pytest.mark.parametrize("n", WIDTHS)

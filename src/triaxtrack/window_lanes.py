@@ -6,8 +6,10 @@ in its scalar remainder, and a compare's result is then one bit a lane in a word
 * :func:`at_most`: the word of a row's pixels at most a grey level (the bytes compared at once);
 * :func:`within`: the word of a row's pixels within a reach of a centre, from the squared
   column offsets of the centre (:func:`column_squares`, once per centre) plus the row's;
-* :func:`pixel_sums`: over the pixels of a word, the sums of their levels ``v`` and of ``v j``;
-* :func:`column_sums`: over the columns of a word, the sums of ``j`` and ``j^2``;
+* :func:`row_sums` (and :func:`pos_sums`): over the rows of a window and the pixels of each
+  row's words, the sums of 1, j, j^2, the row's y and y^2, the levels ``v``, ``v j`` and ``v y``,
+  kept in the lanes over the rows and summed across them once (a row's sum across its lanes is a
+  chain of shuffles: one per row was most of a blob's sums);
 * :func:`copy_row`: a frame row's pixels copied into a window as one vector, and their largest
   (:mod:`triaxtrack.window_levels`), and :data:`prefetch`: a hint to fetch a frame's cache line
   (the next window's rows, while this one is counted: the frame is larger than the caches)
@@ -128,44 +130,6 @@ def _within(lanes: int) -> Any:
     return intrinsic(typer)
 
 
-def _pixel_sums(lanes: int) -> Any:
-    """An intrinsic ``(wins, at, word)``: the sums of ``v = wins[at + j]`` and of ``v j`` over the
-    lanes j of ``word`` (in int32 lanes: at most 255 x 2016, exact)."""
-
-    def typer(typingctx: Any, wins: Any, at: Any, word: Any) -> Any:
-        if not (_bytes_ok(wins, at) and word == types.int64):
-            return None
-
-        def codegen(context: Any, builder: Any, sig: Any, args: Any) -> Any:
-            vi32, mask, total, const, _ = _lanes(builder, lanes)
-            row = builder.zext(_row(context, builder, sig.args[0], args[0], args[1], lanes), vi32)
-            v = builder.select(mask(args[2]), row, const([0] * lanes))
-            sums = [total(v), total(builder.mul(v, const(range(lanes))))]
-            return context.make_tuple(builder, sig.return_type, sums)
-
-        return types.UniTuple(types.int64, 2)(wins, at, word), codegen
-
-    return intrinsic(typer)
-
-
-def _column_sums(lanes: int) -> Any:
-    """An intrinsic ``(word)``: the sums of ``j`` and of ``j^2`` over the lanes j of ``word``."""
-
-    def typer(typingctx: Any, word: Any) -> Any:
-        if word != types.int64:
-            return None
-
-        def codegen(context: Any, builder: Any, sig: Any, args: Any) -> Any:
-            _, mask, total, const, _ = _lanes(builder, lanes)
-            bits, zero = mask(args[0]), const([0] * lanes)
-            sums = [total(builder.select(bits, const([j**p for j in range(lanes)]), zero)) for p in (1, 2)]
-            return context.make_tuple(builder, sig.return_type, sums)
-
-        return types.UniTuple(types.int64, 2)(word), codegen
-
-    return intrinsic(typer)
-
-
 def _copy_row(lanes: int) -> Any:
     """An intrinsic ``(g, at, wins, row, word)``: the ``lanes`` bytes of the 2-d uint8 array ``g``
     from byte ``at`` of its data stored at ``wins[row:]``, and the largest of them in the lanes of
@@ -220,12 +184,64 @@ def _prefetch() -> Any:
 prefetch = _prefetch()  # a hint to fetch a frame's cache line
 
 
+def _row_sums(lanes: int, weights: bool) -> Any:
+    """An intrinsic ``(wins, w, pos, at, stride, lo, hi, h)``: over the rows i = lo .. hi of a
+    window at ``wins[at:]`` (row i's pixels from ``at + i stride + 1``, their offset y = i - 1 -
+    h) and the pixels j of each row's words ``w[i]`` and ``pos[i]`` (1-d int64 arrays): the sums
+    over the pixels of ``w`` of 1, j, j^2, y and y^2 (0 unless ``weights``), and over those of
+    ``pos`` of 1, j, y, v, v j and v y (v = the pixel's level; int64), each kept lane by lane in a
+    vector over the rows (the lanes summed once, not every row's: a row's sums across its lanes
+    wait on one another)."""
+
+    def typer(typingctx: Any, wins: Any, w: Any, pos: Any, at: Any, stride: Any, lo: Any, hi: Any,
+              h: Any) -> Any:  # fmt: skip
+        words_ok = all(isinstance(a, types.Array) and a.dtype == types.int64 and a.ndim == 1
+                       and a.layout == "C" for a in (w, pos))  # fmt: skip
+        if not (words_ok and _bytes_ok(wins, at) and all(a == types.int64 for a in (stride, lo, hi, h))):
+            return None
+
+        def codegen(context: Any, builder: Any, sig: Any, args: Any) -> Any:
+            vi32, mask, total, const, splat = _lanes(builder, lanes)
+            i64 = ir.IntType(64)
+            wd = context.make_array(sig.args[1])(context, builder, args[1]).data
+            pd = context.make_array(sig.args[2])(context, builder, args[2]).data
+            at, stride, lo, hi, h = args[3], args[4], args[5], args[6], args[7]
+            zero, one = const([0] * lanes), const([1] * lanes)
+            acc = [cgutils.alloca_once_value(builder, zero) for _ in range(7)]
+            count = builder.sub(builder.add(hi, ir.Constant(i64, 1)), lo)
+            with cgutils.for_range(builder, count) as loop:
+                i = builder.add(lo, loop.index)
+                bw = mask(builder.load(builder.gep(wd if weights else pd, [i])))
+                bp = mask(builder.load(builder.gep(pd, [i])))
+                first = builder.add(at, builder.add(builder.mul(i, stride), ir.Constant(i64, 1)))
+                v = builder.zext(_row(context, builder, sig.args[0], args[0], first, lanes), vi32)
+                y = builder.sub(builder.sub(i, ir.Constant(i64, 1)), h)
+                yv = splat(builder.trunc(y, _I32), vi32)
+                vp = builder.select(bp, v, zero)
+                adds = (builder.select(bw, one, zero), builder.select(bw, yv, zero),
+                        builder.select(bw, splat(builder.trunc(builder.mul(y, y), _I32), vi32), zero),
+                        builder.select(bp, one, zero),
+                        builder.select(bp, yv, zero), vp, builder.mul(vp, yv))  # fmt: skip
+                for a, add in list(zip(acc, adds, strict=True))[0 if weights else 3 :]:
+                    builder.store(builder.add(builder.load(a), add), a)
+            r = [builder.load(a) for a in acc]
+            j, j2 = const(range(lanes)), const([k * k for k in range(lanes)])
+            sums = [total(r[0]), total(builder.mul(r[0], j)), total(builder.mul(r[0], j2)), total(r[1]),
+                    total(r[2]), total(r[3]), total(builder.mul(r[3], j)), total(r[4]), total(r[5]),
+                    total(builder.mul(r[5], j)), total(r[6])]  # fmt: skip
+            return context.make_tuple(builder, sig.return_type, sums)
+
+        return types.UniTuple(types.int64, 11)(wins, w, pos, at, stride, lo, hi, h), codegen
+
+    return intrinsic(typer)
+
+
 # one intrinsic per number of lanes (numba calls a global function, not one from a tuple)
 _at_most_16, _at_most_32, _at_most_64 = _at_most(16), _at_most(32), _at_most(64)
 _within_16, _within_32, _within_64 = _within(16), _within(32), _within(64)
-_pixel_sums_16, _pixel_sums_32, _pixel_sums_64 = _pixel_sums(16), _pixel_sums(32), _pixel_sums(64)
-_column_sums_16, _column_sums_32, _column_sums_64 = _column_sums(16), _column_sums(32), _column_sums(64)
 _copy_row_16, _copy_row_32, _copy_row_64 = _copy_row(16), _copy_row(32), _copy_row(64)
+_row_sums_16, _row_sums_32, _row_sums_64 = _row_sums(16, True), _row_sums(32, True), _row_sums(64, True)
+_pos_sums_16, _pos_sums_32, _pos_sums_64 = _row_sums(16, False), _row_sums(32, False), _row_sums(64, False)
 _ONE = np.int64(1)
 
 
@@ -282,7 +298,6 @@ def _by_lanes(on16: Any, on32: Any, on64: Any) -> Any:
 
 
 _within_by_lanes = _by_lanes(_within_16, _within_32, _within_64)
-_pixel_sums_by_lanes = _by_lanes(_pixel_sums_16, _pixel_sums_32, _pixel_sums_64)
 
 
 @numba.njit(cache=True, inline="always")
@@ -293,24 +308,6 @@ def within(n: int, squares: np.ndarray, d2y: float, reach2: float) -> np.int64:
     if not d2y <= reach2:  # (no pixel of the row is: its words need no vector)
         return np.int64(0)
     return _within_by_lanes(n, squares, d2y, reach2)
-
-
-@numba.njit(cache=True, inline="always")
-def pixel_sums(wins: np.ndarray, row: int, n: int, word: np.int64) -> tuple[int, int]:
-    """Over the pixels of bits ``word`` of the row at ``wins[row:]`` (``n`` columns): the sums of
-    their levels v and of v j."""
-    return _pixel_sums_by_lanes(n, wins, row, word)
-
-
-@numba.njit(cache=True, inline="always")
-def column_sums(n: int, word: np.int64) -> tuple[int, int]:
-    """Over the columns j of bits ``word`` (of a row of ``n``): the sums of j and of j^2."""
-    lanes = lanes_of(n)
-    if lanes == 16:
-        return _column_sums_16(word)
-    if lanes == 32:
-        return _column_sums_32(word)
-    return _column_sums_64(word)
 
 
 @numba.njit(cache=True, inline="always")
@@ -325,3 +322,33 @@ def copy_row(g: np.ndarray, at: int, wins: np.ndarray, row: int, n: int) -> int:
     if lanes == 32:
         return _copy_row_32(g, at, wins, row, full)
     return _copy_row_64(g, at, wins, row, full)
+
+
+@numba.njit(cache=True, inline="always")
+def row_sums(wins: np.ndarray, w: np.ndarray, pos: np.ndarray, at: int, n: int, lo: int, hi: int) -> tuple:
+    """Over the rows lo .. hi of an ``n``-column (padded) window at ``wins[at:]`` (row i's pixels
+    from ``at + i (n + 2) + 1``; its offset y = i - 1 - n // 2) and the pixels j (its columns) of
+    each row's words ``w[i]`` and ``pos[i]``: the sums over those of ``w`` of 1, j, j^2, y and y^2,
+    and over those of ``pos`` of 1, j, y, v, v j and v y (v: the pixel's level; int64)."""
+    lanes, h, stride = lanes_of(n), np.int64(n // 2), np.int64(n + 2)
+    first, last = np.int64(lo), np.int64(hi)
+    if lanes == 16:
+        return _row_sums_16(wins, w, pos, at, stride, first, last, h)
+    if lanes == 32:
+        return _row_sums_32(wins, w, pos, at, stride, first, last, h)
+    return _row_sums_64(wins, w, pos, at, stride, first, last, h)
+
+
+@numba.njit(cache=True, inline="always")
+def pos_sums(wins: np.ndarray, pos: np.ndarray, at: int, n: int, lo: int, hi: int) -> tuple:
+    """:func:`row_sums` over the pixels of the words ``pos`` only: the sums of 1, j, y, v, v j and
+    v y."""
+    lanes, h, stride = lanes_of(n), np.int64(n // 2), np.int64(n + 2)
+    first, last = np.int64(lo), np.int64(hi)
+    if lanes == 16:
+        r = _pos_sums_16(wins, pos, pos, at, stride, first, last, h)
+    elif lanes == 32:
+        r = _pos_sums_32(wins, pos, pos, at, stride, first, last, h)
+    else:
+        r = _pos_sums_64(wins, pos, pos, at, stride, first, last, h)
+    return r[5], r[6], r[7], r[8], r[9], r[10]

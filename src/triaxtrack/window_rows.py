@@ -1,12 +1,13 @@
 """One target's blob in its window (:mod:`triaxtrack.window`) on masks packed one row a word
 (bit j: column j), for windows of at most 63 columns: the same masks, re-centring and sums as the
 byte masks of :mod:`triaxtrack.window` give. A row's disc is the word of its pixels' distance
-tests, a 3x3 dilation is three ORs of shifted words, and a row's ink, distance tests and sums
-over a word's pixels are each a few vector instructions on the whole row
-(:mod:`triaxtrack.window_lanes`). The sums are of integers, the same in any order: the same
-results. The planes of words are indexed in place (a view of one
-would count references, atomically, for every target). Also the valley between touching targets
-(:func:`valley`), which both kernels share. Compiled with numba."""
+tests, a 3x3 dilation is three ORs of shifted words, and a row's ink and distance tests are each
+a few vector instructions on the whole row, the sums over the words' pixels vectors kept over
+the rows (:mod:`triaxtrack.window_lanes`). The sums are of integers, the same in any order: the
+same results. The planes of words are indexed in place, and viewed only where the window's rows
+are summed (compiled, as :func:`triaxtrack.window._measure_one`, without reference counts). Also
+the valley between touching targets (:func:`valley`), which both kernels share. Compiled with
+numba."""
 
 from __future__ import annotations
 
@@ -18,7 +19,7 @@ import numpy as np
 from numba.core import types
 from numba.core.extending import intrinsic
 
-from triaxtrack.window_lanes import at_most, column_squares, column_sums, pixel_sums, within
+from triaxtrack.window_lanes import at_most, column_squares, pos_sums, row_sums, within
 
 MEAN_SHIFT_STEPS = 3  # re-centring steps of the disc; motion left after prediction is sub-pixel
 INK_NOISE_K = 3.5  # ink: darker than the white level by at least this x the noise (one-sided
@@ -28,9 +29,9 @@ VALLEY_STEP_PX = 0.25  # the line between two touching targets is sampled this o
 MAX_COLUMNS = 63  # the widest window whose rows fit a word (and a bit to shift into)
 # the words of a window (rows of a (planes, n + 2) int64 array; rows 0 and n + 1 empty): ink, ink
 # beyond doubt, the disc, the target's cell, the blob, its growth by one pixel and by GROW_PX, the
-# other ink's growth, scratch
-_INK, _SURE, _DISC, _CELL, _BLOB, _NEAR, _GROWN, _FRINGE, _SPARE = range(9)
-PLANES = 9
+# other ink's growth, scratch (the weighted pixels, at last), the weighted pixels of positive contrast
+_INK, _SURE, _DISC, _CELL, _BLOB, _NEAR, _GROWN, _FRINGE, _SPARE, _POS = range(10)
+PLANES = 10
 _U = np.uint64  # unsigned indices: numba leaves out the wrap-around of negative indices
 _ONE = np.int64(1)
 
@@ -141,15 +142,6 @@ def blob_moments(
 
 
 @numba.njit(cache=True, inline="always")
-def _row_sums(wins: np.ndarray, row: int, n: int, h: int, t: np.int64) -> tuple[int, int, int]:
-    """Over the pixels of bits ``t`` of the ``n``-column window row at ``wins[row:]``: the sums of
-    their levels v, offsets x (from column ``h``) and v x (x = j - h)."""
-    sv, svj = pixel_sums(wins, row, n, t)
-    sj, _ = column_sums(n, t)
-    return sv, sj - h * _popcount(t), svj - h * sv
-
-
-@numba.njit(cache=True, inline="always")
 def _mean_shift(wins: np.ndarray, at: int, n: int, words: np.ndarray, white: float, cx: float, cy: float,
                 core: float, squares: np.ndarray) -> tuple[float, float]:  # fmt: skip
     """The contrast-weighted centre of the ink (plane ``_INK`` of ``words``) within ``core``
@@ -159,26 +151,23 @@ def _mean_shift(wins: np.ndarray, at: int, n: int, words: np.ndarray, white: flo
     their sums, so their centre, and ends the re-centring without summing them again. Sums of
     integers (exact, in any order): sum(w x) = W sum(x) - sum(v x). ``squares``: scratch
     (:func:`~triaxtrack.window_lanes.column_squares`)."""
-    h, stride = n // 2, n + 2
+    h = n // 2
     if not (np.isfinite(cx) and np.isfinite(cy)):
         return cx, cy  # no pixel is taken: it stays put
     for step in range(MEAN_SHIFT_STEPS):
-        same = step > 0
+        same, lo, hi = step > 0, n + 1, 0
         column_squares(n, h, cx, squares)
         for i in range(1, n + 1):
             dy = (i - 1 - h) - cy
             t = words[_INK, i] & within(n, squares, dy * dy, core)
             same &= t == words[_SPARE, i]
             words[_SPARE, i] = t
+            if t:
+                lo, hi = min(lo, i), i
         if same:  # the pixels of the step before: its centre again
             break
-        cnt = sv = sx = svx = sy = svy = 0
-        for i in range(1, n + 1):
-            t = words[_SPARE, i]
-            if t:
-                rv, rx, rvx = _row_sums(wins, at + _U(i * stride + 1), n, h, t)
-                rc, y = _popcount(t), np.int64(i - 1 - h)
-                cnt, sv, sx, svx, sy, svy = cnt + rc, sv + rv, sx + rx, svx + rvx, sy + rc * y, svy + rv * y
+        cnt, sj, sy, sv, svj, svy = pos_sums(wins, words[_SPARE], at, n, lo, hi)
+        sx, svx = sj - h * cnt, svj - h * sv  # x = j - h
         ux, uy = shifted_centre(cnt, white, sv, sx, svx, sy, svy)
         if cnt == 0 or (ux == cx and uy == cy):
             break
@@ -254,23 +243,21 @@ def measure_rows(wins: np.ndarray, at: int, n: int, darkest: int, sure_level: in
         words[_SPARE, i] = words[_INK, i] & ~words[_BLOB, i]
     _dilate(words, _SPARE, _FRINGE, n)
     runs = trunc = np.int64(0)
-    area = cnt = sv = sx = svx = sy = svy = npx = ax = ax2 = ay = ay2 = 0
+    area = 0
     below = int(math.ceil(white)) - 1  # the levels with a positive contrast
-    for i in range(max(first - GROW_PX - 1, 1), min(last + GROW_PX + 1, n) + 1):
+    lo, hi = max(first - GROW_PX - 1, 1), min(last + GROW_PX + 1, n)
+    for i in range(lo, hi + 1):
         out = words[_NEAR, i] & ~words[_DISC, i] & words[_CELL, i]
         runs |= out & words[_SURE, i]
         trunc |= out & words[_INK, i]
         area += _popcount(words[_BLOB, i])
-        w = words[_GROWN, i] & ~words[_FRINGE, i] & words[_CELL, i]
-        if w == 0:
-            continue
-        row, y = at + _U(i * stride + 1), np.int64(i - 1 - h)
-        rn, (sj, sj2) = _popcount(w), column_sums(n, w)  # the weighted pixels' x = j - h, and x^2
-        rx, rx2 = sj - h * rn, sj2 - 2 * h * sj + h * h * rn
-        pos = w & at_most(wins, row, n, below)  # those with a positive contrast: their v, x, v x
-        rc, (rv, svj), (pj, _) = _popcount(pos), pixel_sums(wins, row, n, pos), column_sums(n, pos)
-        rpx, rvx = pj - h * rc, svj - h * rv
-        npx, ax, ax2, ay, ay2 = npx + rn, ax + rx, ax2 + rx2, ay + rn * y, ay2 + rn * y * y
-        cnt, sv, sx, svx, sy, svy = cnt + rc, sv + rv, sx + rpx, svx + rvx, sy + rc * y, svy + rv * y
+        w = words[_GROWN, i] & ~words[_FRINGE, i] & words[_CELL, i]  # the weighted pixels,
+        words[_SPARE, i] = w  # and those with a positive contrast (their levels summed)
+        words[_POS, i] = w & at_most(wins, at + _U(i * stride + 1), n, below) if w else w
+    npx, sj, sj2, ay, ay2, cnt, pj, sy, sv, svj, svy = row_sums(
+        wins, words[_SPARE], words[_POS], at, n, lo, hi
+    )
+    ax, ax2 = sj - h * npx, sj2 - 2 * h * sj + h * h * npx  # x = j - h
+    sx, svx = pj - h * cnt, svj - h * sv
     s, cu, cv, du, du2, dv, dv2 = blob_moments(cnt, white, sv, sx, svx, sy, svy, npx, ax, ax2, ay, ay2)
     return runs != 0, trunc != 0, area, s, cu, cv, npx, du, du2, dv, dv2
