@@ -70,10 +70,15 @@ def shape_changed(mass: np.ndarray, smass: np.ndarray, ref: np.ndarray, sref: np
     for i in range(n):
         fresh[i] = measured[i] and blind[i] == 0
     scatter_ref, scatter_last = np.empty(2), np.empty(2)
+    over_all = False  # whether a class's scatter was taken over all (the other's may be the same)
     for c in range(2):
         of = fresh & (divided == (c == 1))
-        if of.sum() < min_count:  # the scatter over all (only then: each takes two medians)
-            of = fresh
+        everyone = of.sum() < min_count or of.sum() == fresh.sum()  # (the same targets as all)
+        if everyone and over_all:  # the scatter over all again: the same medians
+            scatter_ref[c], scatter_last[c] = scatter_ref[c - 1], scatter_last[c - 1]
+            continue
+        if everyone:  # the scatter over all (only then: each takes two medians)
+            of, over_all = fresh, True
         scatter_ref[c] = _scatter(mass, ref, of, min_count, mad_to_sigma)
         scatter_last[c] = _scatter(mass, last, of, min_count, mad_to_sigma)
     out = np.zeros(n, np.bool_)
