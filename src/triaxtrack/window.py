@@ -56,6 +56,7 @@ from typing import Any, NamedTuple
 
 import numba
 import numpy as np
+from numba.core.cpu import CPUTargetOptions
 
 from triaxtrack.nearest import overlapping_discs
 from triaxtrack.window_lanes import SLACK, prefetch
@@ -123,8 +124,10 @@ _U = np.uint64  # unsigned indices: numba leaves out the wrap-around of negative
 # would keep the loops from running on whole vectors
 # The per-window loops are compiled without the runtime's reference counts (numba's option _nrt,
 # not in its type stubs): they make no array, and every array they are given or view would
-# otherwise be counted up and down, atomically, for every window (a tenth of the kernel's time)
-_UNCOUNTED: dict[str, Any] = {"cache": True, "_nrt": False}
+# otherwise be counted up and down, atomically, for every window (a tenth of the kernel's time).
+# The option is numba's own, not a public one: a numba without it compiles them counted (the
+# same results, slower) rather than failing at import
+_UNCOUNTED: dict[str, Any] = {"cache": True, **({"_nrt": False} if hasattr(CPUTargetOptions, "_nrt") else {})}
 
 
 @numba.njit(cache=True)
