@@ -41,13 +41,7 @@ from triaxtrack.identify.cell import (
     _straight_chains,
 )
 from triaxtrack.identify.coded import _ct_stripes, _plausible_cts
-from triaxtrack.identify.membrane import (
-    _across_axis,
-    _facing_column,
-    _label_beside_band,
-    _off_grid,
-    _region_between,
-)
+from triaxtrack.identify.membrane import _facing_column, _label_beside_band, _off_grid
 from triaxtrack.identify.merged import _recentred_beside_band
 from triaxtrack.identify.state import UNLABELLED
 from triaxtrack.identify.uncoded_stripes import _camera_azimuth, _end_state, _steps, _which_stripe
@@ -366,26 +360,6 @@ def test_a_stripe_is_told_from_a_membrane_column_by_its_spacing(kit):
     found = _straight_chains(pos, np.r_[stripe_ids, column, row], axis, pitch, design)
     assert len(found) == 1 and sorted(found[0]) == list(stripe_ids)
     assert list(found[0]) == list(stripe_ids) or list(found[0]) == list(stripe_ids[::-1])  # in order
-
-
-def test_regions_are_bridged_only_across_one_band():
-    """Three membrane regions side by side across the axis (image down): the middle one faces
-    each outer one across a band, the outer two face each other only through it (a bridge
-    between them counted the middle's columns from their spacing at its edges: 12 columns off
-    on a 4K camera); a region of fewer dots than a region needs separates nothing."""
-    axis = np.array([0.0, 1.0])
-    pos, regions = [], []
-    for x0, cols in ((0.0, 3), (40.0, 20), (200.0, 3), (120.0, 1)):
-        grid = {}
-        for j in range(cols):
-            for i in range(10 if cols > 1 else 2):
-                grid[(i, j)] = len(pos)
-                pos.append((x0 + 8.0 * j, 6.0 * i))
-        regions.append(grid)
-    across = _across_axis(regions, np.array(pos), axis, min_dots=12)
-    assert np.isnan(across[3])  # two dots
-    assert not _region_between(across, 0, 1) and not _region_between(across, 1, 2)
-    assert _region_between(across, 0, 2) and _region_between(across, 2, 0)
 
 
 def test_only_a_brighter_surface_holds_a_stripes_candidates():

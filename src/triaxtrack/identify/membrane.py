@@ -120,14 +120,11 @@ def _label_membrane(f: _Frame, pool: _Pool, centres: dict, design: KitDesign, p:
     # a region with no pedestal CT of its own (beyond a longitudinal stripe's band, towards a
     # silhouette) is fixed across the band from a fixed neighbour, where the phase of the larger
     # dots leaves exactly one choice
-    across = _across_axis(regions, f.pos, axis, p.min_region_dots)
     changed = True
     while changed:
         changed = False
         for ri in [r for r in reasons if phases[r] is not None]:
             for rj, off in list(fixed.items()):
-                if _region_between(across, ri, rj):
-                    continue  # not neighbours across one band
                 res = _bridge(regions[ri], phases[ri], regions[rj], off, f.pos, axis, design)
                 if res is not None:
                     fixed[ri] = res
@@ -145,25 +142,6 @@ def _label_membrane(f: _Frame, pool: _Pool, centres: dict, design: KitDesign, p:
                 _assign(f, k, ids[node], name, 0.9)
             else:
                 f.reason[k] = "beyond the membrane's rows"
-
-
-def _across_axis(regions: list[dict], pos: np.ndarray, axis: np.ndarray, min_dots: int) -> np.ndarray:
-    """Each region's median place across the specimen's axis (pixels; NaN for a region of fewer
-    than ``min_dots`` dots, which separates nothing)."""
-    right = np.array([axis[1], -axis[0]])
-    return np.array([float(np.median(pos[np.fromiter(g.values(), int)] @ right)) if len(g) >= min_dots
-                     else np.nan for g in regions])  # fmt: skip
-
-
-def _region_between(across: np.ndarray, ri: int, rj: int) -> bool:
-    """Whether another region (:func:`_across_axis`) lies between regions ``ri`` and ``rj``
-    across the axis: they do not face each other across one band, and a bridge between them
-    would count the columns of the whole region between from their spacing at its edges (a 4K
-    camera at a 290 mm ring bridged a silhouette strip from the opposite one, 78 columns over,
-    and labelled it 12 columns off)."""
-    lo, hi = sorted((across[ri], across[rj]))
-    others = np.delete(across, [ri, rj])
-    return bool(np.any((others > lo) & (others < hi)))
 
 
 def _bridge(grid, phase, other, other_off, pos, axis, design: KitDesign) -> tuple[int, int] | None:
