@@ -670,6 +670,20 @@ def test_a_sparse_column_beside_a_band_is_passed_over(kit):
     assert _bridge(beyond, phase, fixed, (0, 0), pos, np.array([0.0, 1.0]), design) == (20, 3)
 
 
+def test_regions_more_columns_apart_than_a_band_hides_are_not_bridged(kit):
+    """Beyond a gap of 20 columns (more than a band hides: another region lies there) the
+    columns' spacing at the facing edges does not count the columns between; the same patches
+    three columns apart are bridged (a 4K camera bridged one silhouette strip from the other, 78
+    columns over, and labelled it 12 columns off)."""
+    design = kit[0]
+    m = design.membrane
+    phase = ((m.large_first - 3) % m.large_step, (m.large_first - 20) % m.large_step)
+    for hidden, expect in ((3, (20, 3)), (20, None)):
+        fixed, beyond, pos = _patches_across_a_band(lambda r: True, lambda c, r, h=hidden: 10.0 * (c + h - 3))
+        got = _bridge(beyond, phase, fixed, (0, 0), pos, np.array([0.0, 1.0]), design)
+        assert got == expect
+
+
 def test_a_facing_column_holds_half_the_rows_of_the_fullest():
     """Columns 10-19 hold rows 5-25 (21 rows); column 9, the outermost, seven of them (enough to
     match but broken up beside the band): the column facing the band is 10, the next in. With

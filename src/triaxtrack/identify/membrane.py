@@ -149,8 +149,9 @@ def _bridge(grid, phase, other, other_off, pos, axis, design: KitDesign) -> tupl
 
     Rows are matched along the specimen's axis between the two regions' facing columns; the
     number of columns hidden between them is estimated from the gap and the columns' spacing,
-    and must be the one value within 1.5 columns of that estimate that puts this region's
-    larger dots on the design's larger columns and rows.
+    and must be the one value within 1.5 columns of that estimate, and at most
+    ``BRIDGE_MAX_HIDDEN``, that puts this region's larger dots on the design's larger columns
+    and rows.
     """
     m = design.membrane
     step, first = m.large_step, m.large_first
@@ -205,7 +206,7 @@ def _bridge(grid, phase, other, other_off, pos, axis, design: KitDesign) -> tupl
         return None  # the rows across the band do not put the larger dots on larger rows
     c_b = jb + c_off_b  # column number (unwrapped) of the other's facing column
     fits = [
-        n for n in range(1, int(n_est) + 3)
+        n for n in range(1, min(int(n_est) + 3, BRIDGE_MAX_HIDDEN + 1))
         if abs(n - n_est) < 1.5 and (pj + c_b + side * n - ja - first) % step == 0
     ]  # fmt: skip
     if len(fits) != 1:
@@ -215,6 +216,11 @@ def _bridge(grid, phase, other, other_off, pos, axis, design: KitDesign) -> tupl
 
 
 BRIDGE_MIN_ROWS = 5  # rows matched across a band to fix a region from its neighbour
+# a band 5 mm wide hides 1-5 membrane columns behind it (the bridges of five tests and two renders);
+# regions farther apart do not face each other across one band: bridged over the whole region
+# between (a 4K camera at a 290 mm ring, from one silhouette strip to the other, 78 columns
+# over), the columns counted from their spacing at its edges came 12 columns off
+BRIDGE_MAX_HIDDEN = 8
 BRIDGE_MAX_INWARD = 2  # columns a facing column may lie in from a region's extreme one
 # a facing column holds at least this share of the rows of the region's fullest column: an outer
 # column broken up beside the band holds a few rows, too few to match across it (a 720p camera
