@@ -173,7 +173,8 @@ def height_sigma_mm(
 ) -> float:
     """1-sigma standard uncertainty (mm) of the specimen's height (its top face above the bottom
     face, which the pedestal frame fixes), as the volume's (:func:`volume_uncertainty`): the larger
-    of the cap's rigid fit residual (``rms / sqrt(3 n - 6)``) and the cameras' cluster estimate
+    of the face's own standard error (``TopCap.face_sigma_mm``: the rigid fit's residual over
+    ``sqrt(3 n - 6)``, or a face carried up from the membrane's) and the cameras' cluster estimate
     with ``influence`` and the height's ``gradient`` (:func:`height_gradient`), and the codec's part
     with the points' ``shifts``, in quadrature."""
     part, _, _, codec = _measured_parts(cap.face_sigma_mm, influence, gradient, shifts)
