@@ -10,7 +10,15 @@ import numpy as np
 import pandas as pd
 from numpy.typing import ArrayLike
 
-SIDE_FRAMES = 5  # P frames extrapolated to the keyframe on each side (at least MIN_SIDE_FRAMES)
+# P frames extrapolated to the keyframe on each side: the nearest SIDE_FRAMES where the side
+# holds FAR_FRAMES more, else those it leaves, at least SHORT_SIDE_FRAMES (a side needs at
+# least MIN_SIDE_FRAMES). The departure measured there corrects the whole GOP, but x265 codes
+# the first P frames unlike the rest (on realistic 720p renders the membrane's horizontal
+# shrink in the first P frame was 1.35 times the GOP's mean, in the second half of it): a
+# quadratic through the nearest 5 weighs the first 1.8 times (its weights' norm 2.1) and read
+# 1.6-1.8 times the mean; through 10, 0.9 times (norm 1.2)
+SIDE_FRAMES = 10
+SHORT_SIDE_FRAMES = 5
 MIN_SIDE_FRAMES = 4  # fewer on a side: that side of the keyframe is not measured
 FAR_FRAMES = 10  # the P frames beyond those that give the velocity (at least MIN_FAR_FRAMES)
 MIN_FAR_FRAMES = 4
@@ -73,7 +81,8 @@ def _side_fit(
     realistic 720p render the top cap's CTs jumped together by 0.03-0.06 px from frame to frame
     in every camera at once."""
     side_frames = _side_frames(frames, keys, k, side)
-    near, far = side_frames[:SIDE_FRAMES], side_frames[SIDE_FRAMES : SIDE_FRAMES + FAR_FRAMES]
+    n = max(min(SIDE_FRAMES, len(side_frames) - FAR_FRAMES), SHORT_SIDE_FRAMES)
+    near, far = side_frames[:n], side_frames[n : n + FAR_FRAMES]
     if len(near) < MIN_SIDE_FRAMES or len(far) < MIN_FAR_FRAMES:
         return None
     at_k = uv[np.searchsorted(frames, k)]
