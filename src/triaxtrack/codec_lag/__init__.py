@@ -17,7 +17,10 @@ keyframe.
 
 The lag is measured per camera at each keyframe ``K`` from the camera's own tracks: on each
 side of ``K``, a quadratic in time is fitted to every dot's centroids in the nearest
-``SIDE_FRAMES`` P frames (all from the same GOP, so with one common lag), and evaluated at
+``SIDE_FRAMES`` P frames (all from the same GOP, so with one common lag; fewer, at least
+``SHORT_SIDE_FRAMES``, on a side too short to leave ``FAR_FRAMES`` beyond them: a quadratic
+through few frames weighs the first P frame most, which x265 codes unlike the rest of its
+GOP), and evaluated at
 ``K``; there it gives the dot's position ``lag`` frames late, ``x(K) - lag x'(K)``, while the
 keyframe shows ``x(K)``. The difference over all the membrane dots is fitted by least squares
 as the lag times each dot's velocity ``x'`` plus an affine field of the image coordinates per
