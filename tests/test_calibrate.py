@@ -177,6 +177,27 @@ def test_grid_checks_catch_a_corner_a_square_off():
     assert not ok[2, 3] and ok.sum() == 29
 
 
+def _board_views(cfg: SimulationConfig, cam: Camera, board: BoardDesign, noise: float) -> list[BoardImage]:
+    """20 board views of ``cam`` (at the origin) from :func:`board_poses`: exact corners plus
+    ``noise`` px, whole boards in the board's frame and partial ones in their own grid frame
+    (a quarter turn and a shift of the board's)."""
+    obj = board_corners_mm(board)
+    w, h = cam.width, cam.height
+    rng = np.random.default_rng(0)
+    views = []
+    for i, (R, t) in enumerate(board_poses(cfg, cam, board, 20)):
+        uv = project_air(Camera("b", w, h, cam.K, cam.dist, R, t), obj)
+        seen = ((uv >= 8) & (uv <= [w - 9, h - 9])).all(axis=1)
+        uv = uv + rng.normal(0, noise, uv.shape)
+        if seen.all():
+            views.append(BoardImage(f"{i}", uv, obj, whole=True))
+        else:
+            ij = grid_indices(obj[seen], board.square_mm)
+            own = np.c_[-ij[:, 1] + 7, ij[:, 0] - 3, np.zeros(len(ij))] * board.square_mm
+            views.append(BoardImage(f"{i}", uv[seen], own, whole=False))
+    return views
+
+
 def test_two_stage_fit_with_partial_views_in_their_own_frames():
     """fit_views fits the whole boards first, then every view from there. Partial views whose
     object points are in their own grid frame (a quarter turn and a shift of the board's)
@@ -185,23 +206,11 @@ def test_two_stage_fit_with_partial_views_in_their_own_frames():
     0.04-0.23 px)."""
     board = load_design(Path(__file__).resolve().parents[1] / "config" / "kit.yaml").board
     cfg = SimulationConfig(cameras=3, width=960, height=540)
-    obj = board_corners_mm(board)
     size = (960, 540)
     for cam in make_cameras(cfg):
         cam0 = Camera(cam.name, 960, 540, cam.K, cam.dist, np.eye(3), np.zeros(3))
         for noise, bound in ((0.0, 1e-3), (0.005, 0.03)):
-            rng = np.random.default_rng(0)
-            views = []
-            for i, (R, t) in enumerate(board_poses(cfg, cam0, board, 20)):
-                uv = project_air(Camera("b", 960, 540, cam.K, cam.dist, R, t), obj)
-                seen = ((uv >= 8) & (uv <= [951, 531])).all(axis=1)
-                uv = uv + rng.normal(0, noise, uv.shape)
-                if seen.all():
-                    views.append(BoardImage(f"{i}", uv, obj, whole=True))
-                else:
-                    ij = grid_indices(obj[seen], board.square_mm)
-                    own = np.c_[-ij[:, 1] + 7, ij[:, 0] - 3, np.zeros(len(ij))] * board.square_mm
-                    views.append(BoardImage(f"{i}", uv[seen], own, whole=False))
+            views = _board_views(cfg, cam0, board, noise)
             assert sum(v.whole for v in views) == 12
             _, K, dist, per_view = fit_views(views, board, size, "standard")
             assert len(dist) == 5 and len(per_view) == 20
@@ -222,19 +231,7 @@ def test_boards_are_placed_and_fitted_for_a_wider_more_distorted_lens():
     f = 0.56 * 1280
     K = np.array([[f, 0, 639.5], [0, f, 359.5], [0, 0, 1]])
     cam = Camera("c", 1280, 720, K, np.array([-0.4, 0.125, 0, 0, 0.0]), np.eye(3), np.zeros(3))
-    obj = board_corners_mm(board)
-    rng = np.random.default_rng(0)
-    views = []
-    for i, (R, t) in enumerate(board_poses(SimulationConfig(), cam, board, 20)):
-        uv = project_air(Camera("b", 1280, 720, K, cam.dist, R, t), obj)
-        seen = ((uv >= 8) & (uv <= [1271, 711])).all(axis=1)
-        uv = uv + rng.normal(0, 0.005, uv.shape)
-        if seen.all():
-            views.append(BoardImage(f"{i}", uv, obj, whole=True))
-        else:
-            ij = grid_indices(obj[seen], board.square_mm)
-            own = np.c_[-ij[:, 1] + 7, ij[:, 0] - 3, np.zeros(len(ij))] * board.square_mm
-            views.append(BoardImage(f"{i}", uv[seen], own, whole=False))
+    views = _board_views(SimulationConfig(), cam, board, 0.005)
     assert len(views) == 20 and sum(v.whole for v in views) == 12
     _, K_est, dist, _ = fit_views(views, board, (1280, 720), "standard")
     assert undistortion_map_error(Camera("e", 1280, 720, K_est, dist, np.eye(3), np.zeros(3)), cam) < 0.03
