@@ -35,7 +35,8 @@ LAG_ORDER = ["body", "keyframe", "side"]  # the rows' order
 MIN_TARGETS = 3  # a rigid body's targets needed (seen in every frame of a side) to measure its offset
 LAG_COLUMNS = (
     "body", "keyframe", "side", "lag_frames", "sigma_frames", *FIELD_COLUMNS,
-    "sigma_u0_px", "sigma_v0_px", "common_u0_px", "common_v0_px", "dots", "speed_px", "sigma_speed_px",
+    "sigma_u0_px", "sigma_v0_px", "common_u0_px", "common_v0_px", "jitter_u0_px", "jitter_v0_px", "dots",
+    "speed_px", "sigma_speed_px",
 )  # fmt: skip
 
 
@@ -71,10 +72,11 @@ def _positions(tracks: pd.DataFrame) -> tuple[np.ndarray, np.ndarray, np.ndarray
 def _side_fit(
     uv: np.ndarray, frames: np.ndarray, keys: np.ndarray, k: int, side: int, least: int = MIN_DOTS
 ) -> tuple | None:
-    """One side of keyframe ``k``: ``(d (n, 2), vel (n, 2), uv_k (n, 2), common (2,))`` for the
+    """One side of keyframe ``k``: ``(d (n, 2), vel (n, 2), uv_k (n, 2), common (4,))`` for the
     dots seen in every frame used: the keyframe's centroid minus the P frames' quadratic
     extrapolated to it, the velocity from the frames beyond, the keyframe's centroid, and the
-    standard error that the frames' common jitter gives the dots' mean ``d`` (None: fewer than
+    standard error that the frames' common jitter gives the dots' mean ``d`` (u, v) followed by
+    that jitter itself (u, v: one P frame's departure from the quadratic; None: fewer than
     ``least`` dots). The common jitter is the scatter of the dots' mean residual about their
     quadratics from frame to frame; it enters through the extrapolation's weights and through
     the keyframe's own frame. A rigid body's targets share it, and so may the cameras: on a
@@ -102,7 +104,7 @@ def _side_fit(
         "nc,cid->nid", basis, np.einsum("cn,nid->cid", np.linalg.pinv(basis), p[:, ok])
     )
     jitter2 = (resid.mean(axis=1) ** 2).sum(axis=0) / max(len(near) - 3, 1)  # (2,)
-    common = np.sqrt(jitter2 * (1.0 + float(w_val @ w_val)))
+    common = np.r_[np.sqrt(jitter2 * (1.0 + float(w_val @ w_val))), np.sqrt(jitter2)]
     return at_k[ok] - fit, vel, at_k[ok], common
 
 
@@ -245,7 +247,8 @@ def estimate_lag(
     show minus what the keyframe shows, besides the lag, with the sign reversed) each zeroed
     where within ``SIGNIFICANT_SIGMAS`` standard errors of zero, the standard errors of ``u0_px``
     and ``v0_px`` from the spread over the dots (``sigma_u0_px``, ``sigma_v0_px``) and from the
-    frames' common jitter (``common_u0_px``, ``common_v0_px``), ``dots`` used and ``speed_px`` (their RMS
+    frames' common jitter (``common_u0_px``, ``common_v0_px``), that jitter in one P frame
+    (``jitter_u0_px``, ``jitter_v0_px``), ``dots`` used and ``speed_px`` (their RMS
     speed, pixels per frame). A rigid body's rows have no lag (NaN) and no slopes, and its speed
     is the length of its mean velocity, with its standard error ``sigma_speed_px`` (NaN for
     the membrane).
