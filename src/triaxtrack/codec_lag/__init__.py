@@ -64,7 +64,9 @@ correction leaves is carried with each P-frame observation of a rigid body as ``
 codec_v_px``: the pooled offset's standard error where it is applied, and where it is not, the
 offset itself as well (``sqrt(m^2 + se^2)``: on a clean 1080p test with two keyframes the top
 cap's -0.014 px, alike in all 16 cameras, is too uncertain to take off and reads the cap 2.8
-micrometres low); an error in every camera at once, which the triangulation turns into each
+micrometres low), and in quadrature the P frame's own departure from the offset (the frames'
+common jitter about the side's quadratic, ``jitter_u0_px, jitter_v0_px``: one offset corrects
+every P frame); an error in every camera at once, which the triangulation turns into each
 point's shift and the volume's uncertainty adds in full (:mod:`triaxtrack.influence`).
 
 In the workflow, rule ``measure_codec_lag`` measures one camera at every keyframe of the test
