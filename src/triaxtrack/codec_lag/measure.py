@@ -129,7 +129,8 @@ def _fit_side(d: np.ndarray, vel: np.ndarray, at_k: np.ndarray, common: np.ndarr
     height): zeroing one of such a pair after a joint fit left half a correction, of the wrong
     size. Returns the lag, its standard error (from the last fit that held it), the field's six
     coefficients (0 where dropped), the standard errors of its constant terms (from the spread
-    over the dots and from the frames' ``common`` jitter), the dots and their RMS speed."""
+    over the dots and from the frames' ``common`` jitter), that jitter in one P frame, the dots
+    and their RMS speed."""
     A = _design(vel, at_k)
     y = np.r_[d[:, 0], d[:, 1]]
     active = np.ones(A.shape[1], bool)
@@ -168,8 +169,8 @@ def _fit_side(d: np.ndarray, vel: np.ndarray, at_k: np.ndarray, common: np.ndarr
 def _fit_body(d: np.ndarray, vel: np.ndarray, at_k: np.ndarray, common: np.ndarray) -> tuple:
     """A rigid body's offset on one side of a keyframe, in :func:`_fit_side`'s order: no lag
     (NaN), the mean departure of its targets ``d`` as the field's constant terms, their standard
-    errors from the spread over the targets and from the frames' ``common`` jitter
-    (:func:`_side_fit`), the targets, and the body's speed with its standard error
+    errors from the spread over the targets and from the frames' ``common`` jitter, that jitter
+    in one P frame (:func:`_side_fit`), the targets, and the body's speed with its standard error
     (:func:`_body_speed`)."""
     n = len(d)
     u0, v0 = d.mean(axis=0)
