@@ -1,5 +1,7 @@
 """The codec's motion lag: measured at keyframes against synthetic truth, and removed."""
 
+import json
+
 import numpy as np
 import pandas as pd
 import pytest
@@ -183,6 +185,10 @@ def test_a_bad_lag_file_names_itself(tmp_path):
     path = tmp_path / "cam01.json"
     path.write_text("{}")
     with pytest.raises(ValueError, match="cam01.json: not a codec-lag file"):
+        read_lags(path)
+    old = {"camera": "cam01", "keyframes": [0], "bodies": {}, "columns": list(LAG_COLUMNS[:-3]), "lags": []}
+    path.write_text(json.dumps(old))  # a file of an earlier version, with fewer columns
+    with pytest.raises(ValueError, match="cam01.json: .*run rule measure_codec_lag again"):
         read_lags(path)
 
 

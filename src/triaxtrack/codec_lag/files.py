@@ -63,7 +63,10 @@ def read_lags(path: str | Path) -> tuple[str, LagFile]:
         camera = str(doc["camera"])
         bodies = {str(k): [int(i) for i in v] for k, v in doc["bodies"].items()}
         if list(lags.columns) != list(LAG_COLUMNS):
-            raise ValueError(f"columns {list(lags.columns)}, expected {list(LAG_COLUMNS)}")
+            raise ValueError(
+                f"columns {list(lags.columns)}, expected {list(LAG_COLUMNS)}: written by another"
+                " version of triaxtrack, run rule measure_codec_lag again (--forcerun measure_codec_lag)"
+            )
         numbers = [c for c in LAG_COLUMNS if c != "body"]
         lags = lags.astype({"body": str, **dict.fromkeys(numbers, np.float64)})
     except (OSError, ValueError, KeyError, TypeError, AttributeError) as err:
