@@ -150,6 +150,41 @@ def test_chain_never_skips_a_missing_dot():
     assert max(labels) == 6
 
 
+def _stripe_pool(missing: list[int], extra: list[tuple[float, float]] = ()) -> tuple[_Pool, np.ndarray]:
+    """A longitudinal stripe's 60 dots 7.5 px apart down a slightly curved line (its image at
+    720p), those at ``missing`` not detected, ``extra`` dots added; and each dot's stripe index
+    (-1: an extra dot)."""
+    y = np.arange(60, dtype=float) * 7.5
+    pos = np.c_[20 + 3e-4 * (y - 200) ** 2, y]
+    keep = np.ones(60, bool)
+    keep[missing] = False
+    pos = np.r_[pos[keep], np.reshape(extra, (-1, 2))]
+    index = np.r_[np.nonzero(keep)[0], np.full(len(extra), -1)]
+    blobs = pd.DataFrame({"area_px": 5.0, "background": 1.0, "roundness": 0.8}, index=range(len(pos)))
+    return _Pool(pos, np.ones(len(pos), bool), blobs), index
+
+
+@pytest.mark.parametrize(
+    ("missing", "extra", "reached"),
+    [
+        ([4], [], 59),  # one dot not detected (at 720p a 60 degree view merges one with a fringe)
+        ([4, 30], [], 59),  # one here, one there
+        ([4, 5], [], 3),  # two in a row: the walk stops
+        ([4], [(28.9, 31.0)], 3),  # a dot taken already within the gate of its place: no gap
+    ],
+)
+def test_a_stripes_walk_bridges_one_missing_dot(missing, extra, reached):
+    """A stripe anchored at its top walks on past one missing dot (nothing within the gate of its
+    place, one dot within the gate two steps on), every dot at its own index; never past two."""
+    pool, index = _stripe_pool(missing, extra)
+    pool.free[[0, 1]] = False
+    pool.free[index < 0] = False  # (labelled as another target)
+    labels = grow_chain(pool, {0: 0, 1: 1}, 60, cyclic=False, gate=0.3, max_bracket=2, bridge=True)
+    assert all(index[j] == i for i, j in labels.items())
+    assert max(labels) == reached
+    assert len(labels) == reached + 1 - sum(m <= reached for m in missing)
+
+
 def _line_pool(n: int) -> tuple[_Pool, np.ndarray]:
     """n dots 10 px apart down a slightly curved line, all free."""
     y = np.arange(n, dtype=float) * 10.0

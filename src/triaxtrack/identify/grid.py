@@ -77,12 +77,17 @@ def grow_chain(
     gate: float,
     step_hint: dict[int, np.ndarray] | None = None,
     max_bracket: int = 4,
+    bridge: bool = False,
 ) -> dict[int, int]:
     """Extend a 1-D stripe labelling (index -> dot) by interpolation and stepwise extrapolation.
 
-    A missing dot stops the walk (the next prediction falls between dots, outside the gate), so a
-    gap is never skipped and the IDs beyond it cannot shift. ``step_hint[i]``: the image step from
-    index i to i + 1, used when i has no labelled neighbour to extrapolate from.
+    A missing dot stops the walk (the next prediction falls between dots, outside the gate), so
+    the IDs beyond it cannot shift. With ``bridge``, when the walk has stopped, a walk's end
+    goes on past one missing dot where nothing at all lies within the gate of that dot's
+    prediction and exactly one free dot within the gate of the next one's (two steps on: a dot
+    one step off is a whole spacing away), and on from there with the step across the gap.
+    ``step_hint[i]``: the image step from index i to i + 1, used when i has no labelled
+    neighbour to extrapolate from.
     """
     labels = dict(labels)
     hint = step_hint or {}
@@ -122,6 +127,9 @@ def grow_chain(
                         else:
                             pred = p(a) + d
                         spacing = float(np.linalg.norm(d))
+                    elif bridge and has(a - 2 * s):  # on from a bridged gap
+                        d = 0.5 * (p(a) - p(a - 2 * s))
+                        pred, spacing = p(a) + d, float(np.linalg.norm(d))
                     elif (s == 1 and key(a) in hint) or (s == -1 and key(i) in hint):
                         d = hint[key(a)] if s == 1 else -hint[key(i)]
                         pred, spacing = p(a) + d, float(np.linalg.norm(d))
@@ -135,11 +143,38 @@ def grow_chain(
                     proposals = {k: v for k, v in proposals.items() if v != j}
                     continue
                 proposals[i] = j
+        if not proposals and bridge:
+            proposals = _bridged(pool, labels, n, cyclic, gate)
         if not proposals:
             return labels
         for i, j in proposals.items():
             labels[i] = j
             pool.free[j] = False
+
+
+def _bridged(pool: _Pool, labels: dict[int, int], n: int, cyclic: bool, gate: float) -> dict[int, int]:
+    """:func:`grow_chain`'s bridges: index -> dot for each walk's end (the index behind it
+    labelled) whose next dot is missing, nothing at all within the gate of its prediction (straight
+    on at the last step), and the dot after it alone within the gate of its own; an index or a
+    dot two ends want goes to neither."""
+    found: list[tuple[int, int]] = []
+    for e in labels:
+        for s in (1, -1):
+            idx = [e - s, e + s, e + 2 * s]
+            if not cyclic and not all(0 <= i < n for i in idx):
+                continue
+            back, gap, far = (i % n if cyclic else i for i in idx)
+            if back not in labels or gap in labels or far in labels:
+                continue
+            d = pool.pos[labels[e]] - pool.pos[labels[back]]
+            radius = gate * float(np.linalg.norm(d))
+            if radius <= 0 or pool.tree.query_ball_point(pool.pos[labels[e]] + d, radius):
+                continue  # a dot there, free or taken: not a gap
+            j = pool.unique_within(pool.pos[labels[e]] + 2 * d, radius)
+            if j >= 0:
+                found.append((far, j))
+    indices, dots = [i for i, _ in found], [j for _, j in found]
+    return {i: j for i, j in found if indices.count(i) == 1 and dots.count(j) == 1}
 
 
 NEIGHBOURS = ((1, 0), (-1, 0), (0, 1), (0, -1))
